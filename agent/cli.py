@@ -1,0 +1,64 @@
+"""The ``agent`` command line: one typer app, one module per command in agent/commands/.
+
+Each command module defines a typer-annotated function; this file only registers them
+and turns project errors into one-line messages (exit 2 for bad input, 1 otherwise).
+"""
+
+from __future__ import annotations
+
+import functools
+import sys
+import warnings
+from typing import Callable
+
+import typer
+
+from agent.errors import InputError, RapidIdentError, RapidIdentWarning
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    pretty_exceptions_enable=False,
+    help="rapid-ident: identify virtual models of CNC feed drives from a short G-code run.",
+)
+
+
+def _one_line_warnings(message, category, filename, lineno, file=None, line=None):  # noqa: ANN001
+    print(f"warning: {message}", file=sys.stderr)
+
+
+def reports_errors(func: Callable) -> Callable:
+    """Run a command, printing a RapidIdentError as one line instead of a traceback."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        warnings.showwarning = _one_line_warnings
+        warnings.simplefilter("always", RapidIdentWarning)
+        try:
+            return func(*args, **kwargs)
+        except RapidIdentError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            raise typer.Exit(2 if isinstance(exc, InputError) else 1) from None
+        except KeyboardInterrupt:
+            print("interrupted", file=sys.stderr)
+            raise typer.Exit(130) from None
+
+    return wrapper
+
+
+def _register() -> None:
+    # Imported here so `agent --help` stays fast and a broken optional transport
+    # cannot stop unrelated commands.
+    from agent.commands import registered_commands
+
+    for name, func in registered_commands():
+        app.command(name)(reports_errors(func))
+
+
+def main() -> None:
+    _register()
+    app()
+
+
+if __name__ == "__main__":
+    main()

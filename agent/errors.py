@@ -1,0 +1,69 @@
+"""The project's exception hierarchy, one class per phase.
+
+Library code raises these with a one-line message that names the problem and the
+offending value; each ``agent`` command catches :class:`RapidIdentError` once,
+prints the message and exits non-zero.  Wrap third-party errors with
+``raise XError("...") from exc`` so the cause stays chained for debugging.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "RapidIdentError",
+    "InputError",
+    "ProgramError",
+    "RecordingError",
+    "MachineError",
+    "IdentificationError",
+    "TransportError",
+    "TransportTimeout",
+    "RapidIdentWarning",
+]
+
+
+class RapidIdentError(Exception):
+    """Base class of every error the tool reports to the user."""
+
+
+class InputError(RapidIdentError, ValueError):
+    """A parameter or option given by the user is invalid (out of range, unknown name)."""
+
+
+class ProgramError(InputError):
+    """A G-code program cannot be read; the message carries the line number."""
+
+    def __init__(self, message: str, line: int | None = None, source: str | None = None):
+        where = ""
+        if source:
+            where += f"{source}:"
+        if line is not None:
+            where += f"{line}: " if source else f"line {line}: "
+        elif source:
+            where += " "
+        super().__init__(f"{where}{message}")
+        self.line = line
+        self.source = source
+
+
+class RecordingError(InputError):
+    """A recording (MCAP or CSV) is missing, truncated, malformed or physically implausible."""
+
+
+class MachineError(InputError):
+    """A machine preset or TOML machine file is unknown or inconsistent."""
+
+
+class IdentificationError(RapidIdentError):
+    """The drive model cannot be identified from the data (no motion, no reversals, singular regression)."""
+
+
+class TransportError(RapidIdentError):
+    """A controller connection failed: cannot open, lost, or the peer answered with an error."""
+
+
+class TransportTimeout(TransportError, TimeoutError):
+    """The controller did not answer within the timeout."""
+
+
+class RapidIdentWarning(UserWarning):
+    """Something is suspicious but usable (resampled timing, missing capture summary, ...)."""

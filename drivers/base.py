@@ -1,0 +1,118 @@
+"""The transport-independent driver interface (one class per transport subclasses it).
+
+A driver opens a connection to a controller, streams :class:`Sample` batches stamped
+with the controller's own sample counter, and keeps :class:`CaptureStats`.  It is
+passive: it may read, and may send only the non-moving frames its module docstring
+names (a Modbus read, a CAN SYNC when asked) — never a write that could move an axis.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from drivers.url import PortURL
+
+__all__ = ["Sample", "StreamInfo", "CaptureStats", "Driver"]
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One controller sample tick, every axis.
+
+    ``counter`` is the controller's sample counter (monotonic, wraps handled by the
+    driver); ``t_s`` = counter x sample period, in s, controller clock.  Positions in
+    mm (deg for rotary axes), in the order of :attr:`StreamInfo.axes`.
+    """
+
+    counter: int
+    t_s: float
+    commanded: tuple[float, ...]
+    actual: tuple[float, ...]
+    segment: int = 0
+
+
+@dataclass(frozen=True)
+class StreamInfo:
+    """What a controller says about its stream once opened."""
+
+    axes: tuple[str, ...]
+    sample_period: float  # s
+    controller: str = ""  # free text: make/model/firmware or "rapid-ident virtual CNC (preset ...)"
+    units: tuple[str, ...] = ()  # per axis, "mm" or "deg"; empty means all mm
+    programs: tuple[dict[str, str], ...] = ()  # [{"name":..., "sha256":...}] when the controller knows
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class CaptureStats:
+    """Running counts; ``dropped`` = samples known missing from gaps in the counter."""
+
+    received: int = 0
+    dropped: int = 0
+    corrupt: int = 0  # frames/lines/responses rejected by a checksum or a format check
+    reconnects: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {"received": self.received, "dropped": self.dropped, "corrupt": self.corrupt,
+                "reconnects": self.reconnects}
+
+
+class Driver(abc.ABC):
+    """Base class of every transport driver.
+
+    Subclasses set ``schemes`` (the URL schemes they serve), implement :meth:`_open`,
+    :meth:`_read` and :meth:`_close`.  The base supplies the context manager, the
+    statistics and the end-of-program flag.
+    """
+
+    schemes: ClassVar[tuple[str, ...]] = ()
+    #: URL query options this driver accepts, name -> type (int, float, str, bool)
+    options: ClassVar[dict[str, type]] = {}
+
+    def __init__(self, url: PortURL, axes: list[str] | None = None) -> None:
+        url.check_options(self.options)
+        self.url = url
+        self.wanted_axes = axes
+        self.stats = CaptureStats()
+        self.info: StreamInfo | None = None
+        #: set by the driver when the controller signals the program has ended
+        self.ended = False
+        self._is_open = False
+
+    # -- public API -----------------------------------------------------------------
+    def open(self) -> StreamInfo:
+        """Connect and return the stream description; raises TransportError."""
+        self.info = self._open()
+        self._is_open = True
+        return self.info
+
+    def read(self, timeout: float = 0.5) -> list[Sample]:
+        """Samples received since the last call (possibly none), waiting at most ``timeout`` s."""
+        if not self._is_open:
+            raise RuntimeError("driver not open")
+        return self._read(timeout)
+
+    def close(self) -> None:
+        """Release the connection; idempotent."""
+        if self._is_open:
+            self._is_open = False
+            self._close()
+
+    def __enter__(self) -> "Driver":
+        self.open()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- for subclasses -------------------------------------------------------------
+    @abc.abstractmethod
+    def _open(self) -> StreamInfo: ...
+
+    @abc.abstractmethod
+    def _read(self, timeout: float) -> list[Sample]: ...
+
+    @abc.abstractmethod
+    def _close(self) -> None: ...

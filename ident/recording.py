@@ -1,0 +1,103 @@
+"""The in-memory recording: what every stage after capture works on.
+
+Array layout (the one convention of the project, see ``docs/recording-format.md``):
+time runs along axis 0; every per-sample array has shape ``(N,)``; one
+:class:`AxisTrace` per axis holds commanded and actual position in mm (degrees for
+rotary axes) on the controller's own sample clock ``t`` in seconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["AxisTrace", "Recording"]
+
+
+@dataclass(frozen=True)
+class AxisTrace:
+    """Commanded and actual position of one axis, mm (deg for rotary axes), shape (N,)."""
+
+    commanded: np.ndarray
+    actual: np.ndarray
+
+    @property
+    def tracking_error(self) -> np.ndarray:
+        """e = commanded - actual, mm."""
+        return self.commanded - self.actual
+
+
+@dataclass
+class Recording:
+    """A recording of one or more axes.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Controller time in s (sample counter x period, starting at 0 for a capture).
+    axes : dict[str, AxisTrace]
+        Per-axis traces, in the recorded axis order (e.g. ``{"X": ..., "Y": ...}``).
+    sample_period : float
+        Nominal controller sample period T_s in s.
+    segment : ndarray of int, shape (N,)
+        Index of the program (or capture segment) each sample belongs to; the low- and
+        high-speed identification sets are segments 0 and 1.  Never differentiate or
+        integrate across a change of segment.
+    metadata : dict
+        Free-form description: ``units``, ``transport``, ``controller``, ``programs``
+        (list of ``{"name", "sha256"}``), ``dropped``, ``corrupt``, ``machine`` ...
+    """
+
+    t: np.ndarray
+    axes: dict[str, AxisTrace]
+    sample_period: float
+    segment: np.ndarray = field(default=None)  # type: ignore[assignment]
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.t = np.asarray(self.t, dtype=float)
+        n = self.t.shape[0]
+        if self.segment is None:
+            self.segment = np.zeros(n, dtype=np.int32)
+        else:
+            self.segment = np.asarray(self.segment, dtype=np.int32)
+        for name, tr in self.axes.items():
+            if tr.commanded.shape != (n,) or tr.actual.shape != (n,):
+                raise ValueError(
+                    f"axis {name}: commanded {tr.commanded.shape} and actual {tr.actual.shape} "
+                    f"must both have shape ({n},) like t"
+                )
+        if self.segment.shape != (n,):
+            raise ValueError(f"segment has shape {self.segment.shape}, expected ({n},)")
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def axis_names(self) -> list[str]:
+        return list(self.axes)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.n_samples > 1 else 0.0
+
+    def segments(self) -> list[slice]:
+        """Contiguous slices of samples that share a segment index, in time order."""
+        if self.n_samples == 0:
+            return []
+        cuts = np.flatnonzero(np.diff(self.segment) != 0) + 1
+        bounds = np.concatenate([[0], cuts, [self.n_samples]])
+        return [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
+
+    def select(self, index: slice | np.ndarray) -> "Recording":
+        """A new recording holding only the samples ``index`` (a slice or boolean/int array)."""
+        return Recording(
+            t=self.t[index],
+            axes={k: AxisTrace(v.commanded[index], v.actual[index]) for k, v in self.axes.items()},
+            sample_period=self.sample_period,
+            segment=self.segment[index],
+            metadata=dict(self.metadata),
+        )
