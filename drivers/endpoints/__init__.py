@@ -1,0 +1,1 @@
+"""Simulated controller endpoints: serve a virtual CNC run over a real transport."""
