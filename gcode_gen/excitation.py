@@ -26,8 +26,12 @@ their recordings concatenated:
 
 Every target is quantised to the output resolution (10^-decimals mm) *before* it is
 checked against the range, so the program text holds exactly the checked numbers and no
-written target lies outside centre ± range.  Each program starts with a rapid move to the
-centre and ends with a feed move back to it, so sets can run back to back.
+written target lies outside centre ± range.  Each program starts with a positioning move to
+the centre (G01 at the maximum feed rather than the G00 of Tables 3.2/4.3/4.4, so that
+no move of the program exceeds the feed limit) — the interpolator's default start is
+that point, so in simulation it costs nothing.  The high-speed set ends with a feed move
+back to the centre; the low-speed set ends where its walk ends, so that every one of its
+feed moves (including the first, from the centre) stays within ``low_step``.
 """
 
 from __future__ import annotations
@@ -122,9 +126,9 @@ def _validate(spec: ExcitationSpec) -> None:
         raise InputError(f"axis given twice: {','.join(spec.axes)}")
     if len(spec.center) != len(spec.axes):
         raise InputError(f"{len(spec.center)} centre values for {len(spec.axes)} axes")
-    for name, value in (("range", spec.range_mm), ("low-step", spec.low_step), ("feed", spec.feed)):
+    for name, value, unit in (("range", spec.range_mm, "mm"), ("low-step", spec.low_step, "mm"), ("feed", spec.feed, "mm/s")):
         if not math.isfinite(value) or value <= 0:
-            raise InputError(f"{name} must be a positive number of mm (mm/s for feed), got {value}")
+            raise InputError(f"{name} must be a positive number of {unit}, got {value}")
     if any(not math.isfinite(c) for c in spec.center):
         raise InputError(f"centre must be finite, got {spec.center}")
     if spec.low_step > spec.range_mm:
@@ -209,13 +213,17 @@ def _centre_mm(c: float, spec: ExcitationSpec, decimals: int) -> float:
     return float(_to_mm(np.array([cu]), decimals)[0])
 
 
-def _program(name: str, spec: ExcitationSpec, set_name: str, per_axis: list[np.ndarray], decimals: int) -> Toolpath:
+def _program(name: str, spec: ExcitationSpec, set_name: str, per_axis: list[np.ndarray], decimals: int,
+             return_to_centre: bool) -> Toolpath:
     start = {ax: _centre_mm(c, spec, decimals) for ax, c in zip(spec.axes, spec.center)}
-    blocks = [Block(line=0, n=None, motion="G0", target=dict(start))]
+    # G01 at the maximum feed, not G00: a rapid would run at the machine's rapid rate and
+    # break the feed limit the program promises (SPEC §8).
+    blocks = [Block(line=0, n=None, motion="G1", target=dict(start), feed=float(spec.feed))]
     for k in range(len(per_axis[0])):
         target = {ax: float(per_axis[i][k]) for i, ax in enumerate(spec.axes)}
         blocks.append(Block(line=k + 1, n=None, motion="G1", target=target, feed=float(spec.feed)))
-    blocks.append(Block(line=len(blocks), n=None, motion="G1", target=dict(start), feed=float(spec.feed)))
+    if return_to_centre:
+        blocks.append(Block(line=len(blocks), n=None, motion="G1", target=dict(start), feed=float(spec.feed)))
     return Toolpath(name=name, blocks=tuple(blocks), header=spec.header(set_name), decimals=decimals)
 
 
@@ -223,14 +231,14 @@ def low_speed_program(spec: ExcitationSpec, name: str = "ident_low") -> Toolpath
     """The low-speed set: ``n_low`` random steps up to ``low_step`` mm (Table 4.3)."""
     rng = np.random.default_rng([spec.seed, 0])
     per_axis = [_low_walk(rng, spec, c) for c in spec.center]
-    return _program(name, spec, "low", per_axis, spec.decimals_low)
+    return _program(name, spec, "low", per_axis, spec.decimals_low, return_to_centre=False)
 
 
 def high_speed_program(spec: ExcitationSpec, name: str = "ident_high") -> Toolpath:
     """The high-speed set: ``n_high`` random targets within centre ± range (Tables 3.2, 4.4)."""
     rng = np.random.default_rng([spec.seed, 1])
     per_axis = [_high_targets(rng, spec, c) for c in spec.center]
-    return _program(name, spec, "high", per_axis, spec.decimals_high)
+    return _program(name, spec, "high", per_axis, spec.decimals_high, return_to_centre=True)
 
 
 def identification_programs(

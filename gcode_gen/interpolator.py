@@ -1,0 +1,416 @@
+"""The CNC interpolator: a program's blocks → commanded axis positions sampled at Ts.
+
+Model (the interpolator the thesis's identification experiment assumes, §3.3-3.4):
+
+* **Exact stop** (default): every block starts and ends at rest, as G61.  The feed F
+  (mm/s, path speed) and the acceleration ``a_max`` (mm/s², along the path) are never
+  exceeded; a rapid (G0) runs at ``rapid_feed``.
+* **Velocity profile** per block, rest to rest along the path length L:
+  trapezoidal — accelerate at a_max to F, cruise, decelerate — or triangular when
+  L < F²/a_max, peak speed sqrt(a_max·L).  This is the "S-curve disabled" setting the
+  thesis recommends for identification (sharper transients, richer excitation).
+  With ``j_max`` (mm/s³) the profile is the 7-phase jerk-limited S-curve: acceleration
+  ramps at ±j_max to at most a_max; when the move is too short the peak speed is lowered
+  (closed forms in :func:`plan_profile`).
+* **Sampling on the servo grid**: every block lasts an integer number of periods Ts.
+  The profile's duration T is stretched to n·Ts, n = ceil(T/Ts), by evaluating
+  s(k·T/n): time scaling by c = n·Ts/T >= 1 divides speed by c, acceleration by c² and jerk
+  by c³, so no limit is exceeded, and the block's end point lands exactly on a sample (it is
+  written there exactly, not computed).  Samples are at t = k·Ts, k = 0, 1, …; sample 0 is
+  the start position.
+* **Several axes** move together on a straight line (G0/G1): each axis's share of the path
+  speed and acceleration is its direction cosine, so none exceeds the path limits.
+* **Arcs** (G2/G3, XY plane, optional helical axes moving linearly): the speed is also
+  lowered so the centripetal acceleration v²/r stays <= a_max/√2, and the tangential
+  acceleration is limited to sqrt(a_max² - (v²/r)²), so the total acceleration vector stays
+  <= a_max.  The jerk limit (if any) applies along the path only.
+* **Blending** (``blending=True``, the G64 idea restricted to what keeps the limits exact):
+  consecutive linear blocks with the same direction and feed are run as one move, without
+  stopping in between; any corner, reversal, feed change, arc or dwell still stops.
+
+The result is a :class:`Trajectory`.  :func:`concatenate` joins trajectories into
+segments of one continuous-time trajectory, and :func:`interpolate_programs` runs several
+programs one after another, each starting where the previous one ended.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from agent.errors import InputError
+from gcode_gen.program import Block, Program
+
+__all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile"]
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Commanded positions sampled at t = k·Ts.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        Time in s, exactly k·Ts.
+    axes : dict[str, ndarray]
+        Commanded position per axis letter, mm (deg for rotary axes), each shape (N,).
+    block : ndarray of int, shape (N,)
+        Program line number of the block being executed at each sample (0 for the initial
+        sample, which is the start position before the first block).
+    Ts : float
+        Sample period in s.
+    """
+
+    t: np.ndarray
+    axes: dict[str, np.ndarray]
+    block: np.ndarray
+    Ts: float = 0.001
+
+    @property
+    def duration(self) -> float:
+        """t[-1] in s."""
+        return float(self.t[-1]) if len(self.t) else 0.0
+
+    @property
+    def end(self) -> dict[str, float]:
+        """Last commanded position per axis, mm."""
+        return {ax: float(x[-1]) for ax, x in self.axes.items()}
+
+
+@dataclass(frozen=True)
+class Profile:
+    """A rest-to-rest motion profile along a path of length L (mm).
+
+    Acceleration phase (duration Ta = 2·Tj + Tk): jerk +j for Tj, constant acceleration
+    ap for Tk, jerk -j for Tj (trapezoid: Tj = 0, ap = a_max); cruise at vp for Tc;
+    deceleration mirrors acceleration.  Total T = 2·Ta + Tc (s).
+    """
+
+    L: float
+    vp: float
+    ap: float
+    j: float
+    Tj: float
+    Tk: float
+    Tc: float
+
+    @property
+    def Ta(self) -> float:
+        return 2.0 * self.Tj + self.Tk
+
+    @property
+    def T(self) -> float:
+        return 2.0 * self.Ta + self.Tc
+
+
+def plan_profile(L: float, v: float, a: float, j: float | None = None) -> Profile:
+    """Time-optimal rest-to-rest profile for length L (mm), speed v (mm/s), acceleration a
+    (mm/s²) and, if given, jerk j (mm/s³).
+
+    Trapezoid: vp = v if L >= v²/a, else vp = sqrt(a·L) (triangle).
+    S-curve: the acceleration phase to speed vp has Tj = a/j, Tk = vp/a - a/j when
+    vp >= a²/j, else Tj = sqrt(vp/j), Tk = 0; it covers vp·Ta/2.  If both phases together
+    (vp·Ta) exceed L, vp solves L = vp·Ta(vp): vp = (L·sqrt(j)/2)^(2/3) when that is
+    <= a²/j, else vp² + vp·a²/j - L·a = 0.
+    """
+    if j is None or math.isinf(j):
+        if L >= v * v / a:
+            return Profile(L, v, a, 0.0, 0.0, v / a, (L - v * v / a) / v)
+        vp = math.sqrt(a * L)
+        return Profile(L, vp, a, 0.0, 0.0, vp / a, 0.0)
+
+    def phases(vp: float) -> tuple[float, float, float]:
+        if vp * j >= a * a:
+            Tj = a / j
+            return Tj, vp / a - Tj, a
+        Tj = math.sqrt(vp / j)
+        return Tj, 0.0, j * Tj
+
+    Tj, Tk, ap = phases(v)
+    if v * (2 * Tj + Tk) <= L:
+        return Profile(L, v, ap, j, Tj, Tk, (L - v * (2 * Tj + Tk)) / v)
+    vp = (L * math.sqrt(j) / 2.0) ** (2.0 / 3.0)
+    if vp * j > a * a:
+        q = a * a / j
+        vp = (-q + math.sqrt(q * q + 4.0 * L * a)) / 2.0
+    vp = min(vp, v)
+    Tj, Tk, ap = phases(vp)
+    return Profile(L, vp, ap, j, Tj, max(Tk, 0.0), 0.0)
+
+
+def _s_acc(t: np.ndarray, Tj: np.ndarray, Tk: np.ndarray, ap: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """Distance covered in the acceleration phase after time t (0 <= t <= Ta), vectorised."""
+    v1 = 0.5 * j * Tj * Tj
+    S1 = j * Tj**3 / 6.0
+    v2 = v1 + ap * Tk
+    S2 = S1 + v1 * Tk + 0.5 * ap * Tk * Tk
+    t2 = t - Tj
+    t3 = t - Tj - Tk
+    s1 = j * t**3 / 6.0
+    s2 = S1 + v1 * t2 + 0.5 * ap * t2 * t2
+    s3 = S2 + v2 * t3 + 0.5 * ap * t3 * t3 - j * t3**3 / 6.0
+    return np.where(t < Tj, s1, np.where(t < Tj + Tk, s2, s3))
+
+
+def _evaluate(tau: np.ndarray, p: dict[str, np.ndarray]) -> np.ndarray:
+    """Path distance s(tau) for per-sample profile parameters p (see :class:`Profile`)."""
+    Ta = 2.0 * p["Tj"] + p["Tk"]
+    T = 2.0 * Ta + p["Tc"]
+    D = 0.5 * p["vp"] * Ta
+    acc = _s_acc(np.minimum(tau, Ta), p["Tj"], p["Tk"], p["ap"], p["j"])
+    dec = p["L"] - _s_acc(np.clip(T - tau, 0.0, Ta), p["Tj"], p["Tk"], p["ap"], p["j"])
+    cruise = D + p["vp"] * (tau - Ta)
+    return np.where(tau <= Ta, acc, np.where(tau <= Ta + p["Tc"], cruise, dec))
+
+
+@dataclass
+class _Segment:
+    """One interpolated motion: a block, or several blended linear blocks."""
+
+    kind: str  # "line", "arc", "dwell"
+    p0: np.ndarray
+    p1: np.ndarray
+    L: float
+    v: float
+    a: float
+    lines: list[int]
+    breaks: list[float]  # cumulative path length at the end of each block (blended lines)
+    arc: tuple | None = None  # (cx, cy, r0, r1, theta0, dtheta, ix, iy)
+    dwell_s: float = 0.0
+    motion: str = ""
+    feed: float = 0.0
+
+
+def _check(Ts: float, a_max: float, j_max: float | None, rapid_feed: float) -> None:
+    for name, value, unit in (("Ts", Ts, "s"), ("a_max", a_max, "mm/s²"), ("rapid_feed", rapid_feed, "mm/s")):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise InputError(f"{name} must be a positive number of {unit}, got {value}")
+    if j_max is not None and not (math.isfinite(j_max) and j_max > 0):
+        raise InputError(f"j_max must be a positive number of mm/s³ or None, got {j_max}")
+
+
+def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, rapid_feed: float, blending: bool) -> list[_Segment]:
+    index = {ax: i for i, ax in enumerate(names)}
+    segs: list[_Segment] = []
+    for b in program.blocks:
+        if b.motion == "G4":
+            segs.append(_Segment("dwell", p.copy(), p.copy(), 0.0, 0.0, a_max, [b.line], [0.0], dwell_s=float(b.dwell_s or 0.0)))
+            continue
+        q = p.copy()
+        for ax, value in b.target.items():
+            q[index[ax]] = value
+        if b.motion == "G0":
+            feed = rapid_feed
+        else:
+            if b.feed is None or not b.feed > 0:
+                raise InputError(f"line {b.line}: {b.motion} block without a positive feed")
+            feed = float(b.feed)
+        if b.motion in ("G2", "G3"):
+            segs.append(_arc_segment(b, p, q, index, feed, a_max))
+        else:
+            L = float(np.linalg.norm(q - p))
+            if L <= 1e-12:
+                p = q
+                continue
+            prev = segs[-1] if segs else None
+            if (blending and prev is not None and prev.kind == "line" and prev.motion == b.motion
+                    and prev.feed == feed
+                    and float(np.dot(prev.p1 - prev.p0, q - p)) >= (1.0 - 1e-12) * prev.L * L):
+                prev.p1 = q.copy()
+                prev.L += L
+                prev.lines.append(b.line)
+                prev.breaks.append(prev.L)
+            else:
+                segs.append(_Segment("line", p.copy(), q.copy(), L, feed, a_max, [b.line], [L], motion=b.motion, feed=feed))
+        p = q
+    return segs
+
+
+def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], feed: float, a_max: float) -> _Segment:
+    if b.center is None or "X" not in index or "Y" not in index:
+        raise InputError(f"line {b.line}: arc without an XY centre")
+    ix, iy = index["X"], index["Y"]
+    cx, cy = b.center["X"], b.center["Y"]
+    x0, y0, x1, y1 = p[ix], p[iy], q[ix], q[iy]
+    r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
+    if min(r0, r1) <= 1e-9:
+        raise InputError(f"line {b.line}: arc radius is zero")
+    th0, th1 = math.atan2(y0 - cy, x0 - cx), math.atan2(y1 - cy, x1 - cx)
+    if b.motion == "G3":
+        dth = (th1 - th0) % (2 * math.pi)
+        if dth < 1e-9:
+            dth = 2 * math.pi  # end = start: full circle
+    else:
+        dth = -((th0 - th1) % (2 * math.pi))
+        if dth > -1e-9:
+            dth = -2 * math.pi
+    other = q - p
+    other[ix] = other[iy] = 0.0
+    L = math.hypot(0.5 * (r0 + r1) * abs(dth), float(np.linalg.norm(other)))
+    r = min(r0, r1)
+    # Centripetal v²/r <= a_max/√2; tangential limited so |a| stays <= a_max.
+    v = min(feed, math.sqrt(a_max * r / math.sqrt(2.0)))
+    an = v * v / r
+    at = math.sqrt(max(a_max * a_max - an * an, 0.0))
+    return _Segment("arc", p.copy(), q.copy(), L, v, at, [b.line], [L], arc=(cx, cy, r0, r1, th0, dth, ix, iy), motion=b.motion, feed=feed)
+
+
+def interpolate(
+    program: Program,
+    *,
+    Ts: float = 0.001,
+    a_max: float = 2000.0,
+    j_max: float | None = None,
+    rapid_feed: float = 200.0,
+    start: dict[str, float] | None = None,
+    blending: bool = False,
+) -> Trajectory:
+    """Commanded trajectory of ``program`` sampled every ``Ts`` seconds.
+
+    Parameters
+    ----------
+    program : Program
+        From :func:`gcode_gen.interpreter.parse_program`.
+    Ts : float
+        Interpolation (servo) period, s (default 0.001).
+    a_max : float
+        Path acceleration limit, mm/s² (default 2000, thesis §3.4).
+    j_max : float or None
+        Path jerk limit, mm/s³; None (default) for trapezoidal profiles.
+    rapid_feed : float
+        Path speed of G0 moves, mm/s.
+    start : dict[str, float] or None
+        Position before the first block, mm.  Axes not given start at the first value
+        the program commands for them (so the opening positioning move costs nothing).
+    blending : bool
+        Run consecutive same-direction, same-feed linear blocks without stopping.
+
+    Returns
+    -------
+    Trajectory
+        Samples at t = k·Ts; the axes are those of ``start`` and of the program.
+    """
+    _check(Ts, a_max, j_max, rapid_feed)
+    names = list(dict.fromkeys(list(start or {}) + list(program.axes)))
+    first: dict[str, float] = {}
+    for b in program.blocks:
+        for ax, v in b.target.items():
+            first.setdefault(ax, v)
+    p0 = np.array([(start or {}).get(ax, first.get(ax, 0.0)) for ax in names], dtype=float)
+    segs = _segments(program, names, p0, a_max, rapid_feed, blending)
+
+    # Per segment: profile and number of samples on the Ts grid.
+    n = np.zeros(len(segs), dtype=np.int64)
+    keys = ("L", "vp", "ap", "j", "Tj", "Tk", "Tc")
+    par = {k: np.zeros(len(segs)) for k in keys}
+    T = np.zeros(len(segs))
+    for i, sg in enumerate(segs):
+        if sg.kind == "dwell":
+            n[i] = math.ceil(sg.dwell_s / Ts - 1e-9) if sg.dwell_s > 0 else 0
+            continue
+        prof = plan_profile(sg.L, sg.v, sg.a, j_max)
+        T[i] = prof.T
+        n[i] = max(1, math.ceil(prof.T / Ts - 1e-9))
+        for k in keys:
+            par[k][i] = getattr(prof, k)
+
+    total = int(n.sum())
+    seg_of = np.repeat(np.arange(len(segs)), n)
+    first_k = np.concatenate([[0], np.cumsum(n)[:-1]]) if len(segs) else np.zeros(0, dtype=np.int64)
+    k_local = np.arange(total) - np.repeat(first_k, n) + 1  # 1..n within each segment
+    frac = k_local / np.repeat(n, n).astype(float)  # k/n, exactly 1.0 at each segment end
+    tau = T[seg_of] * frac
+    s = _evaluate(tau, {k: v[seg_of] for k, v in par.items()})
+
+    pos = np.empty((len(names), total))
+    line_of = np.empty(total, dtype=np.int64)
+    for i, sg in enumerate(segs):
+        sl = slice(int(first_k[i]), int(first_k[i] + n[i]))
+        if n[i] == 0:
+            continue
+        if sg.kind == "dwell":
+            pos[:, sl] = sg.p0[:, None]
+            line_of[sl] = sg.lines[0]
+            continue
+        si = np.clip(s[sl], 0.0, sg.L)
+        u = si / sg.L
+        # p1 - (1-u)·d: exact end point at u = 1.
+        pos[:, sl] = sg.p1[:, None] - (1.0 - u)[None, :] * (sg.p1 - sg.p0)[:, None]
+        if sg.kind == "arc":
+            cx, cy, r0, r1, th0, dth, ix, iy = sg.arc
+            th = th0 + u * dth
+            r = r0 + u * (r1 - r0)
+            pos[ix, sl] = cx + r * np.cos(th)
+            pos[iy, sl] = cy + r * np.sin(th)
+            pos[:, sl.stop - 1] = sg.p1
+        if len(sg.lines) == 1:
+            line_of[sl] = sg.lines[0]
+        else:
+            idx = np.searchsorted(np.asarray(sg.breaks), si, side="left")
+            line_of[sl] = np.asarray(sg.lines)[np.minimum(idx, len(sg.lines) - 1)]
+
+    t = np.arange(total + 1) * Ts
+    axes = {ax: np.concatenate([[p0[i]], pos[i]]) for i, ax in enumerate(names)}
+    block = np.concatenate([[0], line_of]).astype(np.int64)
+    return Trajectory(t=t, axes=axes, block=block, Ts=float(Ts))
+
+
+def concatenate(trajectories: Sequence[Trajectory]) -> tuple[Trajectory, np.ndarray]:
+    """Join trajectories one after another in continuous time.
+
+    Each trajectory's first sample follows the previous one's last sample by one period
+    Ts.  An axis missing from one trajectory holds its last known value (or, before it
+    appears, its first value).
+
+    Returns
+    -------
+    (Trajectory, ndarray of int)
+        The joined trajectory and, per sample, the index of the trajectory it came from.
+    """
+    if not trajectories:
+        raise InputError("no trajectory to concatenate")
+    Ts = trajectories[0].Ts
+    for tr in trajectories:
+        if not math.isclose(tr.Ts, Ts, rel_tol=1e-12):
+            raise InputError(f"cannot concatenate trajectories with sample periods {Ts} s and {tr.Ts} s")
+    names = list(dict.fromkeys(ax for tr in trajectories for ax in tr.axes))
+    last: dict[str, float] = {}
+    for ax in names:  # value before an axis first appears: its first value
+        last[ax] = next(float(tr.axes[ax][0]) for tr in trajectories if ax in tr.axes)
+    parts: dict[str, list[np.ndarray]] = {ax: [] for ax in names}
+    for tr in trajectories:
+        for ax in names:
+            x = tr.axes.get(ax)
+            if x is None:
+                x = np.full(len(tr.t), last[ax])
+            parts[ax].append(x)
+            if len(x):
+                last[ax] = float(x[-1])
+    lengths = [len(tr.t) for tr in trajectories]
+    total = sum(lengths)
+    segment = np.repeat(np.arange(len(trajectories)), lengths)
+    joined = Trajectory(
+        t=np.arange(total) * Ts,
+        axes={ax: np.concatenate(parts[ax]) for ax in names},
+        block=np.concatenate([tr.block for tr in trajectories]).astype(np.int64),
+        Ts=Ts,
+    )
+    return joined, segment
+
+
+def interpolate_programs(programs: Sequence[Program], *, start: dict[str, float] | None = None, **kwargs) -> tuple[Trajectory, np.ndarray]:  # noqa: ANN003
+    """Interpolate programs one after another, each starting where the previous ended.
+
+    ``kwargs`` go to :func:`interpolate` (Ts, a_max, j_max, rapid_feed, blending).
+    Returns the joined trajectory and the per-sample program index (see :func:`concatenate`).
+    """
+    trs: list[Trajectory] = []
+    pos = dict(start or {})
+    for prog in programs:
+        tr = interpolate(prog, start=pos or None, **kwargs)
+        trs.append(tr)
+        pos = {**pos, **tr.end}
+    return concatenate(trs)
