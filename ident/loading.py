@@ -143,7 +143,7 @@ def load_mcap(path: str | Path) -> Recording:
     metadata["events"] = events
     metadata["truncated"] = truncated is not None
     units = str(channel_meta.get("units", "")).split(",")
-    metadata["units"] = units
+    metadata["units"] = {a: (units[i] if i < len(units) and units[i] else "mm") for i, a in enumerate(axes)}
     if summary:
         for key in ("dropped", "corrupt"):
             if key in summary:
@@ -230,5 +230,5 @@ def load_csv(path: str | Path) -> Recording:
         axes={a: AxisTrace(data[:, ic].copy(), data[:, ia].copy()) for a, ic, ia in axes},
         sample_period=period if len(t) > 1 else 0.001,
         segment=segment,
-        metadata={"source": "csv", "units": ["mm"] * len(axes)},
+        metadata={"source": "csv", "units": {a: "mm" for a, _, _ in axes}},
     )

@@ -46,7 +46,7 @@ The closed-loop model of eq. 3.3 uses d0 = (K/J)·d⁺ and d1 = (K/J)·d⁻ [mm/
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from agent.errors import MachineError
 
@@ -189,10 +189,6 @@ class AxisDrive:
             raise MachineError(f"substeps must be an integer >= 10 (step <= Ts/10), got {self.substeps!r}")
         object.__setattr__(self, "substeps", int(self.substeps))
         object.__setattr__(self, "dac_resolution", _finite("dac_resolution", self.dac_resolution, nonneg=True))
-
-    def with_(self, **changes) -> "AxisDrive":
-        """A copy with some fields replaced (dataclasses.replace)."""
-        return replace(self, **changes)
 
 
 def closed_loop_parameters(axis: AxisDrive) -> dict[str, float]:
