@@ -7,6 +7,7 @@ and turns project errors into one-line messages (exit 2 for bad input, 1 otherwi
 from __future__ import annotations
 
 import functools
+import os
 import sys
 import warnings
 from typing import Callable
@@ -42,6 +43,17 @@ def reports_errors(func: Callable) -> Callable:
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)
             raise typer.Exit(130) from None
+        except (typer.Exit, typer.Abort, SystemExit):
+            raise
+        except OSError as exc:  # a file or device the user named cannot be used
+            print(f"error: {exc.filename or ''}{': ' if exc.filename else ''}{exc.strerror or exc}", file=sys.stderr)
+            raise typer.Exit(2) from None
+        except Exception as exc:  # a bug: still one line, the traceback on request
+            if os.environ.get("RAPID_IDENT_DEBUG"):
+                raise
+            print(f"error: internal error {type(exc).__name__}: {exc} "
+                  f"(set RAPID_IDENT_DEBUG=1 for the traceback)", file=sys.stderr)
+            raise typer.Exit(1) from None
 
     return wrapper
 

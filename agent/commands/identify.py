@@ -1,0 +1,73 @@
+"""``agent identify``: fit the thesis drive model per axis, check it, diagnose mismatch, report."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from agent.errors import InputError
+
+
+def identify(
+    log: Path = typer.Argument(..., help="Recording to identify from (.mcap or .csv)."),
+    axis: List[str] = typer.Option([], "--axis", help="Axis to identify (repeatable or comma list); default all."),
+    solver: str = typer.Option("exact", "--solver", help="exact (certified constrained optimum), ga (thesis §4.2) or ls."),
+    validate: Optional[Path] = typer.Option(None, "--validate", help="Score the model on this other recording."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the SPEC §6 JSON result here."),
+    report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
+    against: Optional[Path] = typer.Option(None, "--against", help="Simulated log of the same program: compare virtual vs real machine."),
+    model: Optional[Path] = typer.Option(None, "--model", help="Compare against the model of an earlier --json instead of identifying anew."),
+    refine: bool = typer.Option(True, "--refine/--no-refine", help="Output-error refinement after the equation-error solve."),
+    diagnose: bool = typer.Option(True, "--diagnose/--no-diagnose", help="Locate and explain model/recording mismatch."),
+    p_min_hz: float = typer.Option(0.2, "--p-min-hz", help="Lower bound on the real pole p, Hz (eq. 3.8)."),
+    wn_min_hz: float = typer.Option(0.2, "--wn-min-hz", help="Lower bound on the pole pair's natural frequency, Hz."),
+    zeta_min: float = typer.Option(0.2, "--zeta-min", help="Lower bound on the pair's damping ratio."),
+    zeta_max: float = typer.Option(2.0, "--zeta-max", help="Upper bound on the pair's damping ratio."),
+    f_max_hz: Optional[float] = typer.Option(None, "--f-max-hz", help="Upper bound on pole frequencies, Hz (default Nyquist)."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the genetic algorithm and of the diagnosis cross-validation."),
+    ga_population: int = typer.Option(4000, "--ga-population", help="GA population size (thesis: 4000)."),
+    ga_generations: int = typer.Option(500, "--ga-generations", help="GA generations (thesis: 500)."),
+) -> None:
+    """Identify the closed-loop drive model of each axis in LOG and print the result."""
+    from agent.summary import print_summary
+    from agent.workflows.identify import IdentifyOptions, identify as run
+    from ident.model import Bounds
+
+    if solver not in ("exact", "ga", "ls"):
+        raise InputError(f"--solver {solver!r}: choose exact, ga or ls")
+    if ga_population < 10 or ga_generations < 1:
+        raise InputError("--ga-population must be >= 10 and --ga-generations >= 1")
+    for path, flag, suffix in ((json_out, "--json", ".json"), (report, "--report", ".html")):
+        if path is not None and path.suffix.lower() != suffix:
+            raise InputError(f"{flag} {path}: expected a {suffix} file")
+    axes = [a for item in axis for a in item.split(",") if a.strip()]
+    opts = IdentifyOptions(
+        axes=axes or None, solver=solver,
+        bounds=Bounds(p_min_hz=p_min_hz, wn_min_hz=wn_min_hz, zeta_min=zeta_min, zeta_max=zeta_max,
+                      f_max_hz=f_max_hz),
+        refine=refine, diagnose=diagnose, seed=seed,
+        ga_population=ga_population, ga_generations=ga_generations, model_json=model,
+    )
+    result = run(log, validate=validate, against=against, options=opts)
+    print_summary(result)
+    if json_out is not None:
+        json_out.write_text(json.dumps(result.to_dict(), indent=2, allow_nan=False, default=_default))
+        typer.echo(f"wrote {json_out}")
+    if report is not None:
+        from ident.report import write_report
+
+        write_report(result, report)
+        typer.echo(f"wrote {report}")
+
+
+def _default(obj):
+    import numpy as np
+
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

@@ -1,0 +1,43 @@
+"""``agent serve``: a simulated controller serving the virtual CNC run of programs over a transport."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from drivers.endpoints.source import FaultPlan
+
+
+def serve(
+    transport: str = typer.Option(..., "--transport", "-t", help="serial | modbus | can"),
+    program: List[Path] = typer.Option([], "--program", "-p", help="G-code program(s) to run, in order"),
+    recording: Optional[Path] = typer.Option(None, "--recording",
+                                             help="serve an existing log (.mcap/.csv) instead of running programs"),
+    machine: Optional[str] = typer.Option(None, "--machine", "-m", help="machine preset name or TOML file"),
+    effect: List[str] = typer.Option([], "--effect", help="extra physics NAME=VALUE (repeatable)"),
+    seed: int = typer.Option(0, "--seed", help="seed of the simulation noise and of the fault plan"),
+    speed: float = typer.Option(1.0, "--speed", help="1 = real time, 2 = twice as fast"),
+    drop_rate: float = typer.Option(0.0, "--drop-rate", help="fraction of sample ticks not sent (0..1)"),
+    corrupt_rate: float = typer.Option(0.0, "--corrupt-rate", help="fraction of sample ticks sent damaged (0..1)"),
+    disconnect_at: Optional[float] = typer.Option(None, "--disconnect-at",
+                                                  help="break the connection once at this controller time, s"),
+    fault_log: Optional[Path] = typer.Option(None, "--fault-log", help="write the injected faults here (JSON)"),
+    linger: Optional[float] = typer.Option(None, "--linger",
+                                           help="keep serving the end marker this long after the program, s"),
+    opt: List[str] = typer.Option([], "--opt", help="transport option NAME=VALUE, e.g. format=ascii (repeatable)"),
+) -> None:
+    """Serve commanded/actual positions of a virtual CNC run over serial, Modbus or CAN.
+
+    Prints `port: <URL>` first; pass that URL to `agent capture --port`.
+    """
+    from drivers.endpoints.serve import build_recording, endpoint_class, serve as run_serve
+    from drivers.endpoints.base import parse_endpoint_options
+
+    options = parse_endpoint_options(endpoint_class(transport), list(opt))
+    if linger is not None:
+        options["linger"] = linger
+    rec = build_recording(program, machine, effect, seed, recording)
+    faults = FaultPlan(drop_rate=drop_rate, corrupt_rate=corrupt_rate, disconnect_at_s=disconnect_at, seed=seed)
+    run_serve(transport, rec, speed=speed, faults=faults, options=options, fault_log=fault_log)

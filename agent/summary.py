@@ -1,0 +1,44 @@
+"""The terminal summary of an identification: parameters, poles/zeros, constraints, fits, time."""
+
+from __future__ import annotations
+
+import math
+
+import typer
+
+from ident.results import IdentifyResult
+
+
+def _fmt(v: float) -> str:
+    return "n/a" if v is None or not math.isfinite(v) else f"{v:.6g}"
+
+
+def print_summary(result: IdentifyResult) -> None:
+    echo = typer.echo
+    echo(f"recording {result.source}" + (f", validated on {result.validation_source}" if result.validation_source else ""))
+    for name, r in result.axes.items():
+        m = r.model
+        echo(f"\naxis {name}: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
+             + f", preview shift {r.shift} sample(s)")
+        echo("  model (eq. 3.3): " + ", ".join(f"{k}={_fmt(getattr(m, k))}" for k in
+                                                 ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")))
+        echo("  poles:  " + "; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.poles()))
+        echo("  zeros:  " + ("; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.zeros()) or "none"))
+        echo("  active constraints: " + (", ".join(r.active_constraints) or "none"))
+        fi = r.fit_identification
+        line = f"  tracking-error fit: identification {fi.tracking_error_fit_pct:.2f} % (prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm)"
+        if r.fit_validation is not None:
+            fv = r.fit_validation
+            line += f", validation {fv.tracking_error_fit_pct:.2f} % (prediction error rms {fv.tracking_error_rms_mm * 1e3:.2f} µm)"
+        echo(line)
+        echo(f"  equation-error model before refinement: {r.fit_constrained.tracking_error_fit_pct:.2f} %")
+        echo(f"  unconstrained LS: {r.unconstrained_note}")
+        if r.diagnosis is not None:
+            echo("  diagnosis: " + r.diagnosis.summary)
+        echo("  time: " + ", ".join(f"{k} {v:.2f} s" for k, v in r.timings.items()))
+    if result.contour is not None:
+        c = result.contour.to_dict()
+        echo(f"\ncontour error ({c['source']} recording, axes {'/'.join(c['axes'])}): measured max "
+             f"{c['measured']['max_abs_mm'] * 1e3:.2f} µm, predicted max {c['predicted']['max_abs_mm'] * 1e3:.2f} µm, "
+             f"prediction error rms {c['prediction_error']['rms_mm'] * 1e3:.2f} µm")
+    echo(f"\ntotal {result.elapsed_s:.2f} s")

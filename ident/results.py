@@ -1,0 +1,148 @@
+"""What `agent identify` found, per axis, as frozen dataclasses; the JSON of SPEC §6 comes from here."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ident.metrics import FitResult
+from ident.model import Bounds, DriveModel
+from ident.refine import RefineResult
+from ident.solvers.common import SolverResult
+
+__all__ = ["AxisTraces", "AxisResult", "ContourResult", "IdentifyResult"]
+
+
+@dataclass(frozen=True)
+class AxisTraces:
+    """Arrays the report plots (not in the JSON): time s, positions mm, shape (N,)."""
+
+    t: np.ndarray
+    commanded: np.ndarray
+    actual: np.ndarray
+    simulated: np.ndarray
+    segment: np.ndarray
+
+
+@dataclass(frozen=True)
+class AxisResult:
+    """Identification of one axis.
+
+    ``model`` is the final model (refined by output error unless refinement was off);
+    ``constrained`` the equation-error solution of the chosen solver; ``unconstrained``
+    the plain least-squares solution of eq. 3.12 kept for comparison.
+    """
+
+    axis: str
+    model: DriveModel
+    constrained: SolverResult
+    unconstrained: SolverResult
+    refined: RefineResult | None
+    bounds: Bounds
+    sample_period: float
+    shift: int
+    fit_identification: FitResult
+    fit_validation: FitResult | None
+    fit_constrained: FitResult
+    fit_unconstrained: FitResult | None
+    unconstrained_note: str
+    diagnosis: Any | None = None
+    timings: dict[str, float] = field(default_factory=dict)
+    traces: AxisTraces | None = None
+    validation_traces: AxisTraces | None = None
+
+    @property
+    def active_constraints(self) -> tuple[str, ...]:
+        if self.refined is not None:
+            return tuple(self.refined.active_constraints)
+        return tuple(self.constrained.active_constraints)
+
+    def to_dict(self) -> dict[str, Any]:
+        out = self.model.to_dict(self.bounds, self.sample_period)
+        out["solver"] = self.constrained.solver
+        out["refined"] = self.refined is not None
+        out["active_constraints"] = list(self.active_constraints)
+        out["bounds"] = self.bounds.with_sample_period(self.sample_period).to_dict()
+        out["preview_shift_samples"] = self.shift
+        out["fit"] = {"identification": self.fit_identification.to_dict(),
+                      "validation": self.fit_validation.to_dict() if self.fit_validation else None}
+        eq = self.constrained.model.to_dict(self.bounds, self.sample_period)
+        out["equation_error"] = {
+            "model": eq["model"], "poles": eq["poles"], "zeros": eq["zeros"],
+            "search_variables": eq["search_variables"],
+            "active_constraints": list(self.constrained.active_constraints),
+            "cost": float(self.constrained.cost),
+            "condition_number": float(self.constrained.condition_number),
+            "fit": {"identification": self.fit_constrained.to_dict()},
+            "certificate": _jsonable(self.constrained.details.get("certificate")),
+        }
+        ls = self.unconstrained.model.to_dict(None, self.sample_period)
+        out["unconstrained_ls"] = {
+            "model": ls["model"], "poles": ls["poles"], "zeros": ls["zeros"],
+            "violated_constraints": self.bounds.check(self.unconstrained.model, self.sample_period),
+            "fit": {"identification": self.fit_unconstrained.to_dict() if self.fit_unconstrained else None},
+            "condition_number": float(self.unconstrained.condition_number),
+            "note": self.unconstrained_note,
+        }
+        if self.refined is not None:
+            out["refinement"] = {"fit_before": self.refined.fit_before.to_dict(),
+                                 "fit_after": self.refined.fit_after.to_dict(),
+                                 "nfev": int(self.refined.nfev), "improved": bool(self.refined.improved)}
+        if self.diagnosis is not None:
+            out["diagnosis"] = self.diagnosis.to_dict()
+        out["timings_s"] = {k: round(float(v), 4) for k, v in self.timings.items()}
+        return out
+
+
+@dataclass(frozen=True)
+class ContourResult:
+    """Predicted vs measured contour error of a two-axis recording, mm."""
+
+    axes: tuple[str, str]
+    source: str
+    t: np.ndarray
+    measured: np.ndarray
+    predicted: np.ndarray
+
+    def to_dict(self) -> dict[str, Any]:
+        def stats(e):
+            return {"max_abs_mm": float(np.max(np.abs(e))), "rms_mm": float(np.sqrt(np.mean(e ** 2)))}
+        diff = self.measured - self.predicted
+        return {"axes": list(self.axes), "source": self.source, "measured": stats(self.measured),
+                "predicted": stats(self.predicted), "prediction_error": stats(diff)}
+
+
+@dataclass(frozen=True)
+class IdentifyResult:
+    source: str
+    validation_source: str | None
+    axes: dict[str, AxisResult]
+    contour: ContourResult | None
+    elapsed_s: float
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "source": self.source,
+            "validation_source": self.validation_source,
+            "axes": {name: r.to_dict() for name, r in self.axes.items()},
+            "contour": self.contour.to_dict() if self.contour else None,
+            "elapsed_s": round(self.elapsed_s, 4),
+            "recording": _jsonable(self.metadata),
+        }
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return obj.tolist() if obj.size <= 64 else f"<array of {obj.size}>"
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
+        return obj.item()
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
