@@ -80,23 +80,27 @@ def _fit_or_none(model: DriveModel, rec: Recording, axis: str, shift: int) -> Fi
 
 
 def _ls_note(ls_model: DriveModel, bounds: Bounds, Ts: float, fit_ls: FitResult | None,
-             fit_final: FitResult) -> str:
+             fit_final: FitResult, duration_s: float) -> str:
     violated = bounds.check(ls_model, Ts)
     poles = ", ".join(f"{f:.2f} Hz/ζ {d:.2f}" for f, d in ls_model.poles())
-    unstable = any(d < 0 for _, d in ls_model.poles())
-    if fit_ls is None:
-        run = "its free-run simulation diverges"
-    else:
-        run = f"its free-run tracking-error fit is {fit_ls.tracking_error_fit_pct:.1f} %"
+    run = ("its free-run simulation diverges" if fit_ls is None else
+           f"its free-run tracking-error fit on this recording is {fit_ls.tracking_error_fit_pct:.1f} %")
     if not violated:
         return (f"Unconstrained least squares gives poles {poles}, inside the bounds, and {run}; "
                 f"the constraints are not active here.")
-    why = ("an unstable model" if unstable else
-           "poles outside the allowed region (" + ", ".join(violated) + ")")
+    roots = np.roots(ls_model.denominator)
+    growth = float(np.max(roots.real))
+    if growth > 0:
+        tau = 1.0 / growth
+        why = (f"an unstable model (a pole in the right half-plane, error growing e-fold every {tau:.3g} s"
+               + (f", slower than this {duration_s:.0f} s recording shows" if tau > 0.3 * duration_s else "")
+               + ")")
+    else:
+        why = "poles outside the allowed region (" + ", ".join(violated) + ")"
     return (f"Unconstrained least squares gives poles {poles}: {why}, and {run}. "
-            f"The constraints of eq. 3.8 keep every pole at a physically meaningful frequency and damping, "
-            f"so the model can be simulated on other part programs; the constrained model reaches "
-            f"{fit_final.tracking_error_fit_pct:.1f} %.")
+            f"Such a model cannot be trusted on a longer part program or used in a virtual machine; the "
+            f"constraints of eq. 3.8 keep every pole at a stable, physically meaningful frequency and damping, "
+            f"and the constrained model reaches {fit_final.tracking_error_fit_pct:.1f} %.")
 
 
 def _models_from_json(path: Path) -> dict[str, DriveModel]:
@@ -164,7 +168,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, val: Recording | Non
         axis=axis, model=model, constrained=constrained, unconstrained=ls, refined=refined,
         bounds=opts.bounds, sample_period=Ts, shift=reg.shift,
         fit_identification=fit_id, fit_validation=fit_val, fit_constrained=fit_eq, fit_unconstrained=fit_ls,
-        unconstrained_note=_ls_note(ls.model, opts.bounds, Ts, fit_ls, fit_id),
+        unconstrained_note=_ls_note(ls.model, opts.bounds, Ts, fit_ls, fit_id, rec.duration),
         diagnosis=diagnosis, timings=timings,
         traces=AxisTraces(rec.t, tr.commanded, tr.actual, x_hat, rec.segment),
         validation_traces=val_traces,
