@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import abc
 import threading
+import time
 from typing import Any, ClassVar
 
 from agent.errors import InputError
@@ -70,6 +71,12 @@ class Endpoint(abc.ABC):
             raise InputError(f"--linger must be >= 0 s, got {self.linger_s}")
         #: set to stop serving early (SIGINT/SIGTERM in ``agent serve``)
         self.stop_event = threading.Event()
+        #: controller counters of ticks not put on the wire for reasons outside the fault
+        #: plan (disconnected, nobody listening, send buffer full); in the fault log
+        self.unsent_counters: list[int] = []
+        #: (host Unix time s, last counter sent) about every 50 ms; lets a test tell what
+        #: had been sent when it killed a capture
+        self.sent_timeline: list[tuple[float, int]] = []
         self._closed = False
 
     # -- to implement -------------------------------------------------------------------
@@ -91,6 +98,16 @@ class Endpoint(abc.ABC):
         """Release the transport."""
 
     # -- provided -----------------------------------------------------------------------
+    def note_sent(self, counter: int) -> None:
+        """Record that ticks up to ``counter`` are on the wire (call once per batch)."""
+        now = time.time()
+        if not self.sent_timeline or now - self.sent_timeline[-1][0] >= 0.05:
+            self.sent_timeline.append((now, int(counter)))
+
+    def report(self) -> dict[str, Any]:
+        """What the endpoint did beyond the fault plan (merged into ``--fault-log``)."""
+        return {"unsent_counters": list(self.unsent_counters), "sent_timeline": list(self.sent_timeline)}
+
     def linger(self) -> None:
         """Keep the connection up after the program so the capture sees the end; overridable."""
         self.stop_event.wait(self.linger_s)
