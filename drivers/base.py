@@ -47,7 +47,13 @@ class StreamInfo:
 
 @dataclass
 class CaptureStats:
-    """Running counts; ``dropped`` = samples known missing from gaps in the counter."""
+    """Running counts kept by a driver.
+
+    Drivers leave ``dropped`` at 0 for losses that show as a gap in the sample counter:
+    the capture loop counts those (drivers.capture).  A driver adds to ``dropped`` only
+    losses it knows of that cannot show as a gap.  ``corrupt`` counts frames rejected by
+    a checksum or format check; ``reconnects`` successful re-opens.
+    """
 
     received: int = 0
     dropped: int = 0

@@ -168,7 +168,7 @@ class _Progress:
 
             self._live.update(Text(line))  # plain text: a URL may contain [ ] that markup would eat
         elif not force:
-            self._console.print(line, markup=False, highlight=False)
+            print(line, file=sys.stderr, flush=True)  # no rich wrapping in log files
 
     def stop(self) -> None:
         if self._live is not None:
