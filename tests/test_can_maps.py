@@ -1,0 +1,124 @@
+"""CAN layouts and tick assembly: EDS/PDO mapping (canopen), DBC signals (cantools), counter unwrapping."""
+
+from __future__ import annotations
+
+import struct
+
+import canopen
+import pytest
+
+from agent.errors import InputError
+from drivers.transports import canopen_map as com
+from drivers.transports.can_ticks import CounterUnwrapper, TickAssembler
+from drivers.transports.dbc_map import DEFAULT_DBC, load_dbc, per_mm
+
+
+def _remote(node_id: int, eds=com.DEFAULT_AXIS_EDS) -> canopen.RemoteNode:
+    net = canopen.Network()  # no bus: mapping read from the EDS only
+    return net.add_node(canopen.RemoteNode(node_id, com.load_od(eds, node_id)))
+
+
+# -- EDS / PDO --------------------------------------------------------------------------
+@pytest.mark.parametrize("node_id", [1, 3, 127])
+def test_axis_eds_maps_demand_and_actual_position_in_one_sync_tpdo(node_id):
+    lay = com.axis_pdo(_remote(node_id), from_od=True)
+    assert lay.cob_id == 0x180 + node_id
+    assert lay.length == 8 and lay.trans_type == 1
+    assert lay.fields == ((0x6062, 0), (0x6064, 0))
+    frame = struct.pack("<ii", -123456, 7890123)
+    vals = lay.compiled().unpack(frame)
+    assert vals[lay.position(com.POSITION_DEMAND)] == -123456
+    assert vals[lay.position(com.POSITION_ACTUAL)] == 7890123
+
+
+def test_status_eds_maps_segment_and_state():
+    lay = com.status_pdo(_remote(64, com.DEFAULT_STATUS_EDS), from_od=True)
+    assert (lay.cob_id, lay.length, lay.trans_type) == (0x1C0, 3, 254)
+    vals = lay.compiled().unpack(bytes([1, 0, com.STATE_ENDED]))
+    assert vals[lay.position(com.PROGRAM_STATUS, 1)] == 1
+    assert vals[lay.position(com.PROGRAM_STATUS, 2)] == com.STATE_ENDED
+
+
+def test_sync_parameters_come_from_the_eds():
+    p = com.sync_params(_remote(2), from_od=True)
+    assert (p.cob_id, p.overflow, p.period_s) == (0x80, 240, pytest.approx(0.001))
+
+
+def test_a_node_without_position_tpdo_is_a_one_line_error():
+    # the status node's EDS has a TPDO, but not 0x6062/0x6064
+    with pytest.raises(InputError, match=r"node 5: no enabled TPDO maps both 0x6062"):
+        com.axis_pdo(_remote(5, com.DEFAULT_STATUS_EDS), from_od=True)
+
+
+def test_missing_or_malformed_eds_is_a_one_line_error(tmp_path):
+    with pytest.raises(InputError, match="not found"):
+        com.load_od(tmp_path / "nope.eds", 1)
+    bad = tmp_path / "bad.eds"
+    bad.write_text("[1000]\nParameterName=x\nObjectType=0x7\nDataType=0x0007\n")
+    with pytest.raises(InputError, match="cannot be read"):
+        com.load_od(bad, 1)
+
+
+# -- DBC --------------------------------------------------------------------------------
+def test_dbc_fixture_has_a_counter_frame_and_one_frame_per_axis():
+    lay = load_dbc(DEFAULT_DBC, ["X", "Z"])
+    assert lay.tick_id == 0x100 and lay.modulus == 1 << 16 and lay.has_segment and lay.has_state
+    assert [(p.frame_id, p.axes, p.per_mm) for p in lay.parts] == [
+        (0x101, ((0, "X_commanded", "X_actual"),), (10000.0,)),
+        (0x103, ((1, "Z_commanded", "Z_actual"),), (10000.0,)),
+    ]
+    assert load_dbc(DEFAULT_DBC).axes == tuple("XYZABC")
+
+
+def test_dbc_positions_decode_as_increments_over_increments_per_mm():
+    lay = load_dbc(DEFAULT_DBC, ["X"])
+    msg = lay.parts[0].message
+    data = msg.encode({"X_commanded": 12345, "X_actual": -3}, scaling=False)
+    raw = msg.decode(data, scaling=False)
+    assert raw["X_commanded"] / lay.parts[0].per_mm[0] == 1.2345  # not 1.2345000000000002
+    assert per_mm(0.0001) == 10000.0 and per_mm(0.3) == pytest.approx(1 / 0.3)
+
+
+def test_dbc_unknown_axis_is_a_one_line_error():
+    with pytest.raises(InputError, match=r"axis 'Q' needs signals Q_commanded and Q_actual \(axes found: A, B, C, X, Y, Z\)"):
+        load_dbc(DEFAULT_DBC, ["X", "Q"])
+
+
+# -- counter unwrapping and tick assembly ----------------------------------------------------
+def test_sync_counter_1_to_240_unwraps_to_a_monotonic_counter():
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    raw = [k % 240 + 1 for k in range(1000)]
+    assert [u(r, 0.001 * k) for k, r in enumerate(raw)] == list(range(1000))
+
+
+def test_a_silence_longer_than_a_wrap_is_resolved_with_the_receive_times():
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    for k in range(500):
+        u(k % 240 + 1, 0.001 * k)
+    k = 499 + 1000  # 1000 ticks not heard: 4 wraps and 40 ticks
+    assert u(k % 240 + 1, 0.001 * k + 0.0004) == k
+
+
+def test_ticks_missing_a_part_are_not_emitted_and_counted_lost():
+    asm = TickAssembler(2, 2, CounterUnwrapper(240, 1, 0.001), 0.001)
+    out = []
+    for k in range(6):
+        asm.open_tick(k % 240 + 1, k * 0.001)
+        for part in (0, 1):
+            if (k, part) == (2, 1):
+                continue  # frame lost
+            s = asm.part(part, [(part, k + 0.5, -k)])
+            if s:
+                out.append(s)
+    asm.open_tick(7 % 240 + 1, 0.007)  # counter 6 never seen
+    assert [s.counter for s in out] == [0, 1, 3, 4, 5]
+    assert out[2].commanded == (3.5, 3.5) and out[2].t_s == pytest.approx(0.003)
+    assert asm.lost_ticks == 2 and asm.incomplete_ticks == 1
+
+
+def test_a_part_repeated_within_a_tick_is_ignored():
+    asm = TickAssembler(1, 2, CounterUnwrapper(240, 1, 0.001), 0.001)
+    asm.open_tick(1, 0.0)
+    assert asm.part(0, [(0, 1.0, 1.0)]) is None
+    assert asm.part(0, [(0, 9.0, 9.0)]) is None  # its SYNC was lost: cannot be stamped
+    assert asm.orphan_parts == 1
