@@ -53,12 +53,15 @@ Choices documented here because the rest of the package depends on them:
 from __future__ import annotations
 
 import warnings
-from typing import Literal, Mapping
+from typing import TYPE_CHECKING, Literal, Mapping
 
 import numpy as np
 from scipy import signal
 
 from agent.errors import IdentificationError, InputError, RecordingError, RapidIdentWarning
+
+if TYPE_CHECKING:
+    from ident.recording import Recording
 
 __all__ = [
     "segment_slices",
@@ -628,7 +631,7 @@ def direction(
 # --------------------------------------------------------------------------- recording level
 
 
-def prepare_recording(rec, *, jitter_tol: float = 0.01, gap_factor: float = 1.5):
+def prepare_recording(rec: "Recording", *, jitter_tol: float = 0.01, gap_factor: float = 1.5) -> "Recording":
     """Check and regularise a :class:`ident.recording.Recording` on load.
 
     Time is checked and regularised once for all axes (:func:`regularise_sampling`), each

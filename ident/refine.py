@@ -14,9 +14,10 @@ normalised numerator/friction of eq. 3.10::
 
 with box bounds ``ω_n,min ≤ ω_n ≤ f_max``, ``ζ_min ≤ ζ ≤ ζ_max``, ``p_min ≤ p ≤ f_max``
 (eq. 3.8, :class:`ident.model.Bounds`), so every iterate has its poles inside the
-constraint region.  ``scipy.optimize.least_squares`` (trust-region reflective, finite
-differences) does the search on a coarser simulator (``substeps_search`` friction
-sub-steps; the linear part is exact either way); the before/after fit is computed with the
+constraint region.  A projected Levenberg–Marquardt with a finite-difference Jacobian
+(or, on request, ``scipy.optimize.least_squares``' trust-region reflective method) does
+the search on a coarser simulator (``substeps_search`` friction sub-steps; the linear part
+is exact either way) and on every k-th residual; the before/after fit is computed with the
 default simulator on all samples.  The refined model is returned only if it improves the
 fit of the (bounded) starting model.
 """
@@ -30,10 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from agent.errors import InputError
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel, alphas_from_search
 from ident.preprocessing import shift_command
-from ident.simulation import DEFAULT_SUBSTEPS, simulate
+from ident.simulation import DEFAULT_SUBSTEPS, FreeRun, simulate
 
 __all__ = ["RefineResult", "refine", "model_fit"]
 
@@ -122,7 +124,11 @@ def _start_point(model, bounds: Bounds, Ts: float, regression=None) -> np.ndarra
 
 
 def _model(q: np.ndarray) -> DriveModel:
-    return DriveModel.from_search(math.exp(q[0]), q[1], math.exp(q[2]), *q[3:])
+    """Search vector → model (eq. 3.7, 3.10): a1 = p + 2ζω_n, a2 = ω_n² + 2pζω_n, a3 = pω_n²."""
+    wn, zeta, p = math.exp(q[0]), float(q[1]), math.exp(q[2])
+    a2 = wn * wn + 2.0 * p * zeta * wn
+    beta0, beta1, beta2, dp, dm = (float(v) * a2 for v in q[3:])
+    return DriveModel(a1=p + 2.0 * zeta * wn, a2=a2, a3=p * wn * wn, b0=beta2, b1=beta1, b2=beta0, d0=dp, d1=dm)
 
 
 def _active(q: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> tuple[str, ...]:
@@ -141,6 +147,65 @@ def _active(q: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> tuple[str, ...]:
     return tuple(names)
 
 
+def _projected_lm(residual, q0: np.ndarray, lb: np.ndarray, ub: np.ndarray, *, max_iter: int,
+                  ftol: float, xtol: float, diff_step: float = 1e-5) -> str:
+    """Levenberg–Marquardt on a box, projected: minimises ½‖r(q)‖² with lb ≤ q ≤ ub.
+
+    Forward-difference Jacobian (one simulation per parameter), Marquardt scaling by
+    diag(JᵀJ), steps clipped to the box; parameters on a bound whose gradient points out
+    of the box are held for that iteration.  The 8×8 algebra uses ``einsum``/``solve``
+    only — scipy's TRF spends most of its time in an SVD of the m×8 Jacobian that
+    multi-threaded BLAS makes slow on a loaded machine.  Returns a termination message.
+    """
+    n = q0.size
+    q = q0.copy()
+    r = residual(q)
+    cost = float(r @ r)
+    lam = 1e-3
+    for it in range(max_iter):
+        J = np.empty((r.size, n))
+        for j in range(n):
+            h = diff_step * max(1.0, abs(q[j]))
+            if q[j] + h > ub[j]:
+                h = -h
+            qj = q.copy()
+            qj[j] += h
+            J[:, j] = (residual(qj) - r) / h
+        A = np.einsum("ki,kj->ij", J, J)
+        g = np.einsum("ki,k->i", J, r)
+        held = ((q <= lb) & (g > 0)) | ((q >= ub) & (g < 0))
+        free = np.flatnonzero(~held)
+        if free.size == 0:
+            return "every parameter is held at a bound"
+        Af, gf = A[np.ix_(free, free)], g[free]
+        dA = np.maximum(np.diag(Af), 1e-12 * max(1.0, float(np.max(np.diag(Af)))))
+        for _ in range(10):
+            try:
+                step = np.linalg.solve(Af + lam * np.diag(dA), -gf)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            q_new = q.copy()
+            q_new[free] += step
+            q_new = np.clip(q_new, lb, ub)
+            r_new = residual(q_new)
+            cost_new = float(r_new @ r_new)
+            if cost_new < cost:
+                break
+            lam *= 4.0
+        else:
+            return "no step decreases the cost"
+        dq = np.abs(q_new - q)
+        decrease = (cost - cost_new) / cost if cost > 0 else 0.0
+        q, r, cost = q_new, r_new, cost_new
+        lam = max(lam / 3.0, 1e-9)
+        if decrease < ftol:
+            return f"ftol: relative cost decrease {decrease:.1e} < {ftol:g} after {it + 1} iterations"
+        if np.all(dq <= xtol * (xtol + np.abs(q))):
+            return f"xtol: step below {xtol:g} after {it + 1} iterations"
+    return f"max_iter: {max_iter} iterations"
+
+
 def refine(
     model,
     x_r: np.ndarray,
@@ -150,12 +215,13 @@ def refine(
     segment: np.ndarray | None = None,
     shift: int = 0,
     bounds: Bounds | None = None,
-    max_nfev: int = 120,
+    max_nfev: int = 100,
     substeps_search: int = 2,
     time_budget_s: float | None = 1.0,
     ftol: float = 1e-6,
     max_residuals: int | None = 2000,
     regression=None,
+    optimizer: str = "lm",
 ) -> RefineResult:
     """Refine ``model`` by minimising the free-run tracking-error mismatch under the pole bounds.
 
@@ -175,8 +241,8 @@ def refine(
     bounds : Bounds, optional
         Pole constraints (default ``Bounds()``: 0.2 Hz, ζ ∈ [0.2, 2], f ≤ Nyquist).
     max_nfev : int
-        Budget of optimiser iterations (``least_squares``'s max_nfev; each costs one
-        simulation plus eight for the finite-difference Jacobian, ~2–3 ms each per
+        Budget of optimiser iterations (each costs eight simulations for the
+        finite-difference Jacobian plus one or more trial steps, ~1–3 ms each per
         25 000 samples).
     substeps_search : int
         Friction sub-steps of the simulator during the search (the final fit uses the default).
@@ -192,6 +258,9 @@ def refine(
     regression : ident.regression.Regression, optional
         The eq. 3.11 regression of this recording: used to re-fit the numerator and
         friction when the starting model's poles had to be moved into the bounds.
+    optimizer : "lm" | "trf"
+        The projected Levenberg–Marquardt of this module (default) or
+        ``scipy.optimize.least_squares``' trust-region reflective method.
     """
     t0 = time.perf_counter()
     bounds = bounds or Bounds()
@@ -207,14 +276,15 @@ def refine(
     start_model = _model(q0)
 
     best = {"cost": math.inf, "q": q0.copy(), "n": 0}
-    # Residuals on every k-th sample during the search keep least_squares' linear algebra
-    # (an SVD of the m×8 Jacobian per iteration) small; the simulation itself always runs
-    # on every sample, and the final fit uses all of them.
+    # Residuals on every k-th sample during the search keep the optimiser's linear algebra
+    # (m×8 Jacobians) small; the simulation itself always runs on every sample, and the
+    # final fit uses all of them.
     stride = max(1, x.size // max_residuals) if max_residuals else 1
 
     class _Budget(Exception):
         pass
 
+    free_run = FreeRun(command, Ts, segment=segment, x0=x, substeps=substeps_search)
     t_search = time.perf_counter()  # the budget counts the search only, not the numba warm-up
 
     def residual(q: np.ndarray) -> np.ndarray:
@@ -225,7 +295,7 @@ def refine(
             m = _model(q)
         except Exception:  # parameters that make no model (a2 = 0): a large residual
             return np.full(x[::stride].size, 1e3)
-        r = (simulate(m, command, Ts, segment=segment, x0=x, substeps=substeps_search) - x)[::stride]
+        r = (free_run(m) - x)[::stride]
         if not np.all(np.isfinite(r)):
             return np.full(x[::stride].size, 1e3)
         c = float(r @ r)
@@ -234,9 +304,13 @@ def refine(
         return r
 
     try:
-        sol = least_squares(residual, q0, bounds=(lb, ub), x_scale="jac", diff_step=1e-5,
-                            ftol=ftol, xtol=1e-6, max_nfev=max_nfev, method="trf")
-        message = sol.message
+        if optimizer == "lm":
+            message = _projected_lm(residual, q0, lb, ub, max_iter=max_nfev, ftol=ftol, xtol=1e-6)
+        elif optimizer == "trf":
+            message = least_squares(residual, q0, bounds=(lb, ub), x_scale="jac", diff_step=1e-5,
+                                    ftol=ftol, xtol=1e-6, max_nfev=max_nfev, method="trf").message
+        else:
+            raise InputError(f"optimizer must be 'lm' or 'trf', got {optimizer!r}")
     except _Budget:
         message = f"time budget of {time_budget_s} s reached"
     nfev = best["n"]

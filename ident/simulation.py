@@ -12,9 +12,9 @@ eq. 3.11 uses, so the simulated model is the identified one.
 
 **Integration**: exact discretisation of the linear part for inputs that are linear
 between samples (first-order hold of x_r and u) and friction held over a sub-step: the
-matrix exponential (computed in numba: scipy's ``expm`` goes through multi-threaded BLAS,
-which costs milliseconds on a loaded machine) of the augmented matrix ``[[A, B, 0], [0, 0, I], [0, 0, 0]]·h`` gives
-``s(t+h) = Φ·s + Γ0·w + Γ1·ẇ`` — exact for any pole location (no stiffness limit).
+matrix exponential of the augmented matrix ``[[A, B, 0], [0, 0, I], [0, 0, 0]]·h``
+(computed in numba: scipy's ``expm`` goes through multi-threaded BLAS, which costs
+milliseconds on a loaded machine) gives ``s(t+h) = Φ·s + Γ0·w + Γ1·ẇ`` — exact for any pole location (no stiffness limit).
 Each sample period is split into ``substeps`` sub-steps so that friction switches within a
 period are resolved to Ts/substeps.
 
@@ -44,7 +44,7 @@ from numba import njit
 
 from ident.preprocessing import segment_slices
 
-__all__ = ["simulate", "command_drive", "discretise", "DEFAULT_SUBSTEPS"]
+__all__ = ["simulate", "FreeRun", "command_drive", "discretise", "DEFAULT_SUBSTEPS"]
 
 #: Sub-steps per sample period for the friction switching (exact linear part regardless).
 DEFAULT_SUBSTEPS = 8
@@ -65,20 +65,6 @@ def _gradient(x: np.ndarray, Ts: float) -> np.ndarray:
     return np.gradient(x, Ts)
 
 
-def _command_signals(model, x_r: np.ndarray, Ts: float, segment: np.ndarray | None):
-    """(u, ẋ_r) per segment: the command drive (mm/s²) and the command velocity (mm/s)."""
-    _, _, _, b0, b1, b2, _, _ = _params(model)
-    x_r = np.asarray(x_r, dtype=float)
-    u = np.empty_like(x_r)
-    xr_dot = np.empty_like(x_r)
-    for s in segment_slices(segment, x_r.size):
-        xd = _gradient(x_r[s], Ts)
-        xdd = _gradient(xd, Ts)
-        u[s] = b0 * xdd + b1 * xd + b2 * x_r[s]
-        xr_dot[s] = xd
-    return u, xr_dot
-
-
 def command_drive(model, x_r: np.ndarray, Ts: float, segment: np.ndarray | None = None) -> np.ndarray:
     """The command drive ``u = b0·ẍ_r + b1·ẋ_r + b2·x_r`` (mm/s²) per segment.
 
@@ -92,7 +78,9 @@ def command_drive(model, x_r: np.ndarray, Ts: float, segment: np.ndarray | None 
     segment : ndarray of int (N,), optional
         Segment ids; derivatives are taken within each segment only.
     """
-    return _command_signals(model, x_r, Ts, segment)[0]
+    _, _, _, b0, b1, b2, _, _ = _params(model)
+    fr = FreeRun(x_r, Ts, segment=segment)
+    return b0 * fr.xr_ddot + b1 * fr.xr_dot + b2 * fr.x_r
 
 
 @njit(cache=True)
@@ -255,6 +243,68 @@ def _free_run(xr, u, starts, stops, x_init, v_init, Phi, G0, G1, a2, a3, d0, d1,
     return out
 
 
+class FreeRun:
+    """The free-run simulation of one commanded trajectory, for many models.
+
+    Everything that depends only on the command — segment bounds, start states, the
+    central-difference ẋ_r and ẍ_r — is computed once; calling the object with a model
+    only forms ``u = b0·ẍ_r + b1·ẋ_r + b2·x_r``, discretises and runs the recursion.
+    The output-error refinement calls it hundreds of times.  Parameters as
+    :func:`simulate`.
+    """
+
+    def __init__(
+        self,
+        x_r: np.ndarray,
+        Ts: float,
+        *,
+        segment: np.ndarray | None = None,
+        x0: float | np.ndarray | None = None,
+        substeps: int = DEFAULT_SUBSTEPS,
+    ) -> None:
+        x_r = np.ascontiguousarray(x_r, dtype=float)
+        if x_r.ndim != 1:
+            raise ValueError(f"x_r must be 1-D (N,), got shape {x_r.shape}")
+        if not (np.isfinite(Ts) and Ts > 0):
+            raise ValueError(f"Ts must be a positive sample period in s, got {Ts!r}")
+        n = x_r.size
+        slices = segment_slices(segment, n)
+        starts = np.array([s.start for s in slices], dtype=np.int64)
+        stops = np.array([s.stop for s in slices], dtype=np.int64)
+        if x0 is None:
+            x_init = x_r[starts].copy()
+        elif np.ndim(x0) == 0:
+            if len(slices) != 1:
+                raise ValueError("a scalar x0 is ambiguous with several segments; pass the recorded positions (N,)")
+            x_init = np.array([float(x0)])
+        else:
+            x0 = np.asarray(x0, dtype=float)
+            if x0.shape != (n,):
+                raise ValueError(f"x0 has shape {x0.shape}, expected () or ({n},)")
+            x_init = x0[starts].copy()
+        xr_dot = np.empty_like(x_r)
+        xr_ddot = np.empty_like(x_r)
+        for sl in slices:
+            xr_dot[sl] = _gradient(x_r[sl], Ts)
+            xr_ddot[sl] = _gradient(xr_dot[sl], Ts)
+        self.x_r, self.Ts, self.n = x_r, float(Ts), n
+        self.starts, self.stops, self.x_init = starts, stops, x_init
+        self.v_init = xr_dot[starts].copy()
+        self.xr_dot, self.xr_ddot = xr_dot, xr_ddot
+        self.substeps = max(int(substeps), 1)
+
+    def __call__(self, model) -> np.ndarray:
+        """Simulated actual position x̂ (N,), mm, of ``model`` (DriveModel-like)."""
+        if self.n == 0:
+            return np.empty(0)
+        a1, a2, a3, b0, b1, b2, d0, d1 = _params(model)
+        u = b0 * self.xr_ddot + b1 * self.xr_dot + b2 * self.x_r
+        m = self.substeps
+        Phi, G0, G1 = discretise(model, self.Ts / m)
+        return _free_run(self.x_r, u, self.starts, self.stops, self.x_init, self.v_init,
+                         Phi, G0, G1, a2, a3, d0, d1, m, self.Ts)
+
+
 def simulate(
     model,
     x_r: np.ndarray,
@@ -290,31 +340,4 @@ def simulate(
     ndarray (N,)
         Simulated actual position at the sample instants, mm.
     """
-    x_r = np.ascontiguousarray(x_r, dtype=float)
-    if x_r.ndim != 1:
-        raise ValueError(f"x_r must be 1-D (N,), got shape {x_r.shape}")
-    if not (np.isfinite(Ts) and Ts > 0):
-        raise ValueError(f"Ts must be a positive sample period in s, got {Ts!r}")
-    n = x_r.size
-    if n == 0:
-        return np.empty(0)
-    a1, a2, a3, b0, b1, b2, d0, d1 = _params(model)
-    slices = segment_slices(segment, n)
-    starts = np.array([s.start for s in slices], dtype=np.int64)
-    stops = np.array([s.stop for s in slices], dtype=np.int64)
-    if x0 is None:
-        x_init = x_r[starts].copy()
-    elif np.ndim(x0) == 0:
-        if len(slices) != 1:
-            raise ValueError("a scalar x0 is ambiguous with several segments; pass the recorded positions (N,)")
-        x_init = np.array([float(x0)])
-    else:
-        x0 = np.asarray(x0, dtype=float)
-        if x0.shape != (n,):
-            raise ValueError(f"x0 has shape {x0.shape}, expected () or ({n},)")
-        x_init = x0[starts].copy()
-    u, xr_dot = _command_signals(model, x_r, Ts, segment)
-    v_init = xr_dot[starts].copy()
-    m = max(int(substeps), 1)
-    Phi, G0, G1 = discretise(model, Ts / m)
-    return _free_run(x_r, u, starts, stops, x_init, v_init, Phi, G0, G1, a2, a3, d0, d1, m, Ts)
+    return FreeRun(x_r, Ts, segment=segment, x0=x0, substeps=substeps)(model)

@@ -60,12 +60,13 @@ def test_model_fit_is_the_metric_on_the_free_run():
     assert model_fit(other, x_r, x, TS, shift=1) == expect
 
 
-def test_refinement_recovers_the_free_run_from_a_perturbed_start():
+@pytest.mark.parametrize("optimizer", ["lm", "trf"])
+def test_refinement_recovers_the_free_run_from_a_perturbed_start(optimizer):
     x_r = command(1)
     x = simulate(TRUE, x_r, TS)
     start = DriveModel.from_search(WN * 1.25, ZETA * 0.7, P * 2.0, 0.98, 1.3 * 190.1 / A2, 0.0,
                                    0.6 * 441.0 / A2, 1.4 * -302.0 / A2)
-    res = refine(start, x_r, x, TS, time_budget_s=5.0)
+    res = refine(start, x_r, x, TS, time_budget_s=5.0, optimizer=optimizer)
     assert res.fit_before.tracking_error_fit_pct < 90.0
     assert res.fit_after.tracking_error_fit_pct > 99.5
     assert res.improved and res.fit_after == model_fit(res.model, x_r, x, TS)
@@ -102,3 +103,11 @@ def test_unstable_start_is_moved_inside_the_bounds_first():
     assert all(d > 0 for _, d in res.model.poles())
     assert res.fit_after.tracking_error_fit_pct > 99.0
     assert math.isfinite(res.elapsed_s) and res.nfev > 0
+
+
+def test_unknown_optimizer_is_an_input_error():
+    from agent.errors import InputError
+
+    x_r = command(4, n=500)
+    with pytest.raises(InputError, match="optimizer must be 'lm' or 'trf'"):
+        refine(TRUE, x_r, simulate(TRUE, x_r, TS), TS, optimizer="newton")
