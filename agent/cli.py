@@ -6,8 +6,15 @@ and turns project errors into one-line messages (exit 2 for bad input, 1 otherwi
 
 from __future__ import annotations
 
-import functools
 import os
+
+# The model fits work on tiny matrices (3x3 to 9x9); a multi-threaded BLAS turns each
+# call into a thread hand-off costing ~20 ms on a loaded 2-core machine.  Set before
+# numpy is first imported; a user's explicit setting wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import functools
 import sys
 import warnings
 from typing import Callable

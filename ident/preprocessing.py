@@ -56,7 +56,6 @@ import warnings
 from typing import TYPE_CHECKING, Literal, Mapping
 
 import numpy as np
-from scipy import signal
 
 from agent.errors import IdentificationError, InputError, RecordingError, RapidIdentWarning
 
@@ -444,6 +443,8 @@ def lowpass(
     nyq = 0.5 / Ts
     if not (0 < cutoff_hz < nyq):
         raise InputError(f"low-pass cutoff must be between 0 and Nyquist {nyq:.6g} Hz, got {cutoff_hz!r} Hz")
+    from scipy import signal  # imported here: 0.5 s of start-up for an option that is off by default
+
     b, a = signal.butter(order, cutoff_hz / nyq)
     x = np.asarray(x, dtype=float)
     out = x.copy()

@@ -1,0 +1,47 @@
+"""Wall time of `agent identify` on a 25 s, 1 kHz recording (issue 3: <= 2 s without the HTML report).
+
+Measured two ways in one run: the identification workflow in-process (after one warm-up,
+so numba's on-disk cache is loaded), and the whole command as a user runs it
+(`agent identify LOG --json OUT`, a fresh process: imports and cached JIT loading
+included), with and without the diagnosis.
+
+    python benchmarks/bench_identify.py
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from _recordings import preset_recording
+from agent.workflows.identify import IdentifyOptions, identify
+from drivers.recorder import write_recording_mcap
+
+
+def main() -> None:
+    with tempfile.TemporaryDirectory() as tmp:
+        log = write_recording_mcap(preset_recording("fadal-pid"), Path(tmp) / "pid.mcap")
+        identify(log, options=IdentifyOptions(diagnose=False))  # warm-up: numba cache, imports
+        for label, opts in (("exact, no diagnosis", IdentifyOptions(diagnose=False)),
+                            ("ga 4000x500, no diagnosis", IdentifyOptions(solver="ga", diagnose=False)),
+                            ("exact + diagnosis", IdentifyOptions(diagnose=True))):
+            t0 = time.perf_counter()
+            res = identify(log, options=opts)
+            wall = time.perf_counter() - t0
+            r = res.axes["X"]
+            stages = ", ".join(f"{k} {v:.2f}" for k, v in r.timings.items())
+            print(f"in-process  {label:28s} {wall:6.2f} s  (fit {r.fit_identification.tracking_error_fit_pct:.2f} %; {stages})")
+        for label, extra in (("no diagnosis", ["--no-diagnose"]), ("with diagnosis", [])):
+            t0 = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-m", "agent.cli", "identify", str(log), "--json",
+                                   str(Path(tmp) / "r.json"), *extra], capture_output=True, text=True)
+            wall = time.perf_counter() - t0
+            status = "ok" if proc.returncode == 0 else f"exit {proc.returncode}: {proc.stderr.strip()}"
+            print(f"command     agent identify, {label:17s} {wall:6.2f} s  ({status})")
+
+
+if __name__ == "__main__":
+    main()
