@@ -7,8 +7,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3}
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
-.venv/bin/python -m pip install --quiet --upgrade pip >/dev/null
-.venv/bin/python -m pip install --quiet -e .
+# pip's own output goes to a log, shown only if the install fails
+.venv/bin/python -m pip install --upgrade pip > .venv/install.log 2>&1 || { cat .venv/install.log; exit 1; }
+.venv/bin/python -m pip install -e . >> .venv/install.log 2>&1 || { cat .venv/install.log; exit 1; }
 AGENT=.venv/bin/agent
 OUT=${OUT:-runs/demo}
 TRANSPORT=${TRANSPORT:-serial}
@@ -19,6 +20,7 @@ echo "== 1. generate the identification programs (low- and high-speed sets, Linu
 $AGENT generate --axes X --dialect linuxcnc --seed 1 -o "$OUT"
 
 echo "== 2. serve them from a simulated $MACHINE controller over $TRANSPORT, in real time"
+: > "$OUT/serve.log"
 $AGENT serve --transport "$TRANSPORT" --machine "$MACHINE" \
     --program "$OUT/ident_low.ngc" --program "$OUT/ident_high.ngc" > "$OUT/serve.log" 2>&1 &
 SERVE_PID=$!

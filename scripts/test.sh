@@ -6,6 +6,7 @@ PY=${PYTHON:-python3}
 if [ ! -x .venv/bin/python ]; then
   "$PY" -m venv .venv
 fi
-.venv/bin/python -m pip install --quiet --upgrade pip >/dev/null
-.venv/bin/python -m pip install --quiet -e '.[test]'
+# pip's own output goes to a log, shown only if the install fails
+.venv/bin/python -m pip install --upgrade pip > .venv/install.log 2>&1 || { cat .venv/install.log; exit 1; }
+.venv/bin/python -m pip install -e '.[test]' >> .venv/install.log 2>&1 || { cat .venv/install.log; exit 1; }
 exec .venv/bin/python -m pytest -q "$@"
