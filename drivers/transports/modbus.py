@@ -38,7 +38,7 @@ keeps them contiguous).  A counter that moved by more than one tick since the pr
 poll leaves a gap (ticks the poller never saw, counted as dropped by the capture).  A
 poll is a request/response round trip scheduled by two
 processes, so polling never sees every 1 kHz tick (how many it sees depends on the
-machine's load: benchmarks/bench_capture_modbus.py measures it); over a real RS-485 line at
+machine's load: benchmarks/bench_capture.py --transport modbus measures it); over a real RS-485 line at
 115200 baud a poll of 6 axes takes ~8 ms.  Use trace mode for identification.
 
 Errors: a Modbus exception 4 (server device failure) or 8 (memory parity error), a frame
