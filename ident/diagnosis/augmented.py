@@ -1,0 +1,426 @@
+"""The augmented drive model: thesis eq. 3.3 plus the physics of SPEC §7, simulated in free run.
+
+The base model (eq. 3.3) written as the closed loop it stands for::
+
+    e_i' = x_r − x_fb                                      (integrated tracking error)
+    u    = b0·ẍ_r + b1·ẋ_r + b2·x_r + a3·e_i − a2·x_fb − a1·ẋ   (control-equivalent acceleration, mm/s²)
+    ẍ    = u − d(ẋ),   d = d0·PV(ẋ) + d1·NV(ẋ)              (eq. 3.2, Coulomb friction, mm/s²)
+
+Coulomb friction is simulated with a stick phase (Karnopp): an axis at rest stays at rest
+while ``d1·r ≤ u ≤ d0·r`` (r = 1 for the base model).  Each effect adds its own
+parameters (index into the effect-parameter vector ``ep`` in brackets):
+
+==============  =========================================================================
+backlash        dead band of width ``gap_mm`` [0] between motor (x) and table.  Mode 0
+                (semi-closed loop): the loop and the friction act on the motor, the table
+                position is recorded.  Mode 1 (full-closed loop, as most CNC axes): two
+                masses, motor (share ``motor_fraction`` [11] of the inertia, read by the
+                velocity term) and table (carries the friction, read by the position loop
+                and recorded), coupled by a stiff contact across the gap
+stribeck        breakaway friction ``r·d`` at rest falling to Coulomb ``d`` with speed,
+                ``d(v) = d·(1 + (r − 1)·exp(−(v/v_s)²))``; r = static_to_coulomb_ratio [1],
+                v_s = stribeck_velocity_mm_s [2]
+resonance       a lightly damped pole pair, freq_hz [3], damping ζ [4]: mode 0 a filter on the
+                recorded position ``q̈ + 2ζω q̇ + ω² q = −κ·ẍ``, recorded x + q, gain κ [5];
+                mode 1 the two-mass drive above with a spring-damper of that free-free mode
+time_delay      dead time ``delay_s`` [6] on the recorded position (mode 0: capture/transport)
+                or on the control-equivalent acceleration inside the loop (mode 1)
+cyclic_error    ``c_s·sin(2πx/P) + c_c·cos(2πx/P)``, period_mm P [7], c_s [8], c_c [9]; an error
+                of the recorded position in mm (mode 0) or a disturbance in mm/s² (mode 1)
+saturation      ``u`` clipped to ``±limit`` mm/s² [10], integral frozen while it would wind up
+==============  =========================================================================
+
+Integration: semi-implicit Euler on ``nsub`` sub-steps per sample, ``nsub`` chosen so that
+the fastest pole moves at most 0.15 rad per sub-step (see :func:`substeps`); commanded
+position and velocity are interpolated linearly inside a sample, acceleration is held.
+Every contiguous segment restarts at rest at the recorded actual position.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "EFFECTS",
+    "EP_INDEX",
+    "N_EP",
+    "command_derivatives",
+    "segment_starts",
+    "substeps",
+    "simulate_augmented",
+]
+
+#: The effects of SPEC §7 in a fixed order; the flag vector follows it.
+EFFECTS: tuple[str, ...] = (
+    "backlash",
+    "stribeck",
+    "resonance",
+    "time_delay",
+    "cyclic_error",
+    "saturation",
+)
+#: Index of each effect parameter in the effect-parameter vector ``ep``.
+EP_INDEX: dict[str, int] = {
+    "gap_mm": 0,
+    "static_to_coulomb_ratio": 1,
+    "stribeck_velocity_mm_s": 2,
+    "freq_hz": 3,
+    "damping": 4,
+    "gain": 5,
+    "delay_s": 6,
+    "period_mm": 7,
+    "amplitude_sin": 8,
+    "amplitude_cos": 9,
+    "limit": 10,
+    "motor_fraction": 11,
+}
+N_EP = 12
+#: Frequency of the motor–table contact of a backlash gap in the two-mass variant, Hz.
+CONTACT_HZ = 400.0
+
+
+def segment_starts(n: int, segment: np.ndarray | None) -> np.ndarray:
+    """Boolean (n,) mask, True at the first sample of every contiguous segment."""
+    starts = np.zeros(n, dtype=np.bool_)
+    if n:
+        starts[0] = True
+    if segment is not None and n > 1:
+        seg = np.asarray(segment)
+        starts[1:] |= seg[1:] != seg[:-1]
+    return starts
+
+
+def command_derivatives(x_r: np.ndarray, Ts: float, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Commanded velocity (mm/s) and acceleration (mm/s²) by central differences inside segments.
+
+    As in thesis §3.2: ``ẋ_k = (x_{k+1} − x_{k−1})/(2 Ts)``; one-sided at segment ends so
+    nothing is differentiated across a change of segment.
+    """
+    v = np.empty_like(x_r)
+    a = np.empty_like(x_r)
+    bounds = np.append(np.flatnonzero(starts), x_r.size)
+    for s, e in zip(bounds[:-1], bounds[1:]):
+        seg = x_r[s:e]
+        if seg.size < 3:
+            v[s:e] = 0.0
+            a[s:e] = 0.0
+            continue
+        vs = np.gradient(seg, Ts)
+        v[s:e] = vs
+        a[s:e] = np.gradient(vs, Ts)
+    return v, a
+
+
+def substeps(theta: np.ndarray, Ts: float, freq_hz: float = 0.0) -> int:
+    """Sub-steps per sample so the fastest pole (and resonance) turns ≤ 0.15 rad per sub-step."""
+    a1, a2, a3 = float(theta[0]), float(theta[1]), float(theta[2])
+    try:
+        lam = float(np.max(np.abs(np.roots([1.0, a1, a2, a3]))))
+    except (np.linalg.LinAlgError, ValueError):
+        lam = abs(a1) + math.sqrt(abs(a2))
+    if not np.isfinite(lam):
+        lam = 1e4
+    lam = max(lam, 2.0 * math.pi * freq_hz, abs(a1))
+    return int(min(max(math.ceil(Ts * lam / 0.15), 1), 16))
+
+
+@njit(cache=True, nogil=True)
+def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
+    a1 = th[0]
+    a2 = th[1]
+    a3 = th[2]
+    b0 = th[3]
+    b1 = th[4]
+    b2 = th[5]
+    d0 = th[6]
+    d1 = th[7]
+    n = xr.size
+    h = Ts / nsub
+    on_bl = flags[0] != 0
+    on_st = flags[1] != 0
+    on_rs = flags[2] != 0
+    on_td = flags[3] != 0
+    on_cy = flags[4] != 0
+    on_sa = flags[5] != 0
+    half = 0.5 * ep[0]
+    rs = ep[1] if on_st else 1.0
+    vs = ep[2] if ep[2] > 1e-9 else 1e-9
+    wr = 2.0 * math.pi * ep[3]
+    zr = ep[4]
+    kr = ep[5]
+    tau = ep[6] if on_td else 0.0
+    per = ep[7] if ep[7] > 1e-9 else 1e-9
+    cs = ep[8]
+    cc = ep[9]
+    lim = ep[10]
+    mu = ep[11] if ep[11] > 0.0 else 1.0
+    bl_loop = on_bl and modes[0] == 1
+    rs_two = on_rs and modes[3] == 1
+    two = bl_loop or rs_two
+    if two:
+        # two-mass drive: motor (share mu of J) and table coupled by a spring-damper whose
+        # free-free mode is the resonance, or a stiff contact (CONTACT_HZ, ζ 0.5) across a gap
+        if mu <= 0.0 or mu >= 1.0:
+            mu = 0.8
+        wc = wr if rs_two else 2.0 * math.pi * CONTACT_HZ
+        zc = zr if rs_two else 0.5
+        mred = mu * (1.0 - mu)
+        kc = wc * wc * mred
+        cdmp = 2.0 * zc * wc * mred
+        half_c = half if bl_loop else 0.0
+    else:
+        kc = 0.0
+        cdmp = 0.0
+        half_c = 0.0
+    vt = 0.0
+    td_loop = on_td and modes[1] == 1
+    cy_force = on_cy and modes[2] == 1
+    # ring buffer of u for a dead time inside the loop (fractional, in sub-steps)
+    dsteps = tau / h if td_loop else 0.0
+    nbuf = int(dsteps) + 3
+    buf = np.zeros(nbuf)
+    bi = 0
+    xm = 0.0
+    v = 0.0
+    xt = 0.0
+    q = 0.0
+    qd = 0.0
+    ei = 0.0
+    tw = 2.0 * math.pi / per
+    for k in range(n):
+        if starts[k]:
+            xm = x0[k]
+            xt = xm
+            v = 0.0
+            vt = 0.0
+            q = 0.0
+            qd = 0.0
+            ei = (a2 * xm - b2 * xr[k]) / a3 if a3 != 0.0 else 0.0
+            for i in range(nbuf):
+                buf[i] = 0.0
+            bi = 0
+        y = xt if (on_bl or two) else xm
+        if on_rs and not rs_two:
+            y += q
+        if on_cy and not cy_force:
+            y += cs * math.sin(tw * xm) + cc * math.cos(tw * xm)
+        out[k] = y
+        out_u[k] = 0.0
+        if k == n - 1 or starts[k + 1]:
+            continue
+        for j in range(nsub):
+            f = j / nsub
+            xrj = xr[k] + f * (xr[k + 1] - xr[k])
+            vrj = vr[k] + f * (vr[k + 1] - vr[k])
+            xfb = xt if two else xm
+            u = b0 * ar[k] + b1 * vrj + b2 * xrj + a3 * ei - a2 * xfb - a1 * v
+            wind = True
+            if on_sa:
+                if u > lim:
+                    u = lim
+                    wind = xrj - xfb <= 0.0  # conditional integration (anti-windup)
+                elif u < -lim:
+                    u = -lim
+                    wind = xrj - xfb >= 0.0
+            if j == 0:
+                out_u[k] = u
+            if td_loop:
+                buf[bi] = u
+                # value written dsteps sub-steps ago, linearly interpolated
+                ip = int(dsteps)
+                fr = dsteps - ip
+                i0 = (bi - ip) % nbuf
+                i1 = (bi - ip - 1) % nbuf
+                u = (1.0 - fr) * buf[i0] + fr * buf[i1]
+                bi = (bi + 1) % nbuf
+            if cy_force:
+                u -= cs * math.sin(tw * xm) + cc * math.cos(tw * xm)
+            if two:
+                # coupling force per unit J (never pulling across a backlash gap)
+                dl = xm - xt
+                ddl = v - vt
+                if half_c > 0.0:
+                    if dl > half_c:
+                        fc = kc * (dl - half_c) + cdmp * ddl
+                        if fc < 0.0:
+                            fc = 0.0
+                    elif dl < -half_c:
+                        fc = kc * (dl + half_c) + cdmp * ddl
+                        if fc > 0.0:
+                            fc = 0.0
+                    else:
+                        fc = 0.0
+                else:
+                    fc = kc * dl + cdmp * ddl
+                vn = v + h * (u - fc) / mu
+                mt = 1.0 - mu
+                # the table carries the friction, with a stick phase
+                if vt > 0.0:
+                    lvl = d0
+                    if on_st:
+                        lvl = d0 * (1.0 + (rs - 1.0) * math.exp(-(vt / vs) ** 2))
+                    vtn = vt + h * (fc - lvl) / mt
+                    if vtn < 0.0:
+                        vtn = 0.0
+                elif vt < 0.0:
+                    lvl = d1
+                    if on_st:
+                        lvl = d1 * (1.0 + (rs - 1.0) * math.exp(-(vt / vs) ** 2))
+                    vtn = vt + h * (fc - lvl) / mt
+                    if vtn > 0.0:
+                        vtn = 0.0
+                else:
+                    if fc > d0 * rs:
+                        vtn = h * (fc - d0 * rs) / mt
+                    elif fc < d1 * rs:
+                        vtn = h * (fc - d1 * rs) / mt
+                    else:
+                        vtn = 0.0
+                v = vn
+                vt = vtn
+                xm += h * v
+                xt += h * vt
+                if wind:
+                    ei += h * (xrj - xfb)
+                continue
+            # one mass: friction with a stick phase (eq. 3.2; Stribeck curve when enabled)
+            if v > 0.0:
+                lvl = d0
+                if on_st:
+                    lvl = d0 * (1.0 + (rs - 1.0) * math.exp(-(v / vs) ** 2))
+                vn = v + h * (u - lvl)
+                if vn < 0.0:
+                    vn = 0.0
+            elif v < 0.0:
+                lvl = d1
+                if on_st:
+                    lvl = d1 * (1.0 + (rs - 1.0) * math.exp(-(v / vs) ** 2))
+                vn = v + h * (u - lvl)
+                if vn > 0.0:
+                    vn = 0.0
+            else:
+                if u > d0 * rs:
+                    vn = h * (u - d0 * rs)
+                elif u < d1 * rs:
+                    vn = h * (u - d1 * rs)
+                else:
+                    vn = 0.0
+            acc = (vn - v) / h
+            v = vn
+            xm += h * v
+            if wind:
+                ei += h * (xrj - xfb)
+            if on_bl:
+                if xm - xt > half:
+                    xt = xm - half
+                elif xm - xt < -half:
+                    xt = xm + half
+            if on_rs:
+                qdd = -2.0 * zr * wr * qd - wr * wr * q - kr * acc
+                qd += h * qdd
+                q += h * qd
+    # dead time on the recorded position (capture/transport), fractional, inside segments
+    if on_td and not td_loop and tau > 0.0:
+        sh = tau / Ts
+        ip = int(sh)
+        fr = sh - ip
+        res = out.copy()
+        s0 = 0
+        for k in range(n):
+            if starts[k]:
+                s0 = k
+            i0 = k - ip
+            i1 = k - ip - 1
+            if i0 < s0:
+                i0 = s0
+            if i1 < s0:
+                i1 = s0
+            res[k] = (1.0 - fr) * out[i0] + fr * out[i1]
+        for k in range(n):
+            out[k] = res[k]
+
+
+def simulate_augmented(
+    x_r: np.ndarray,
+    x0: np.ndarray,
+    Ts: float,
+    theta: np.ndarray,
+    *,
+    flags: np.ndarray | None = None,
+    ep: np.ndarray | None = None,
+    modes: np.ndarray | None = None,
+    starts: np.ndarray | None = None,
+    derivs: tuple[np.ndarray, np.ndarray] | None = None,
+    nsub: int | None = None,
+    u_out: np.ndarray | None = None,
+) -> np.ndarray:
+    """Free-run recorded position x̂ (mm) of the augmented model for the command ``x_r`` (mm).
+
+    Parameters
+    ----------
+    x_r : ndarray (N,)
+        Commanded position, mm.
+    x0 : ndarray (N,)
+        Recorded actual position, mm; only read at segment starts (initial state).
+    Ts : float
+        Sample period, s.
+    theta : ndarray (8,)
+        Base parameters a1 (1/s), a2 (1/s²), a3 (1/s³), b0 (–), b1 (1/s), b2 (1/s²),
+        d0, d1 (mm/s²) of eq. 3.3.
+    flags : ndarray of int (6,)
+        1 for each effect of :data:`EFFECTS` that is switched on.
+    ep : ndarray (12,)
+        Effect parameters laid out as :data:`EP_INDEX`.
+    modes : ndarray of int (4,)
+        Variant of backlash (0 semi-closed loop, 1 two-mass full-closed loop), time delay
+        (0 capture, 1 actuation), cyclic error (0 position error, 1 disturbance) and
+        resonance (0 filter on the recorded position, 1 two-mass mode inside the loop).
+    starts : ndarray of bool (N,)
+        First sample of each segment (see :func:`segment_starts`); default one segment.
+    derivs : (ẋ_r, ẍ_r), optional
+        Precomputed :func:`command_derivatives`, mm/s and mm/s².
+    nsub : int, optional
+        Sub-steps per sample; default from :func:`substeps`.
+    u_out : ndarray (N,), optional
+        Filled with the control-equivalent acceleration u (mm/s²) applied at each sample.
+    """
+    x_r = np.ascontiguousarray(x_r, dtype=float)
+    n = x_r.size
+    if starts is None:
+        starts = segment_starts(n, None)
+    if derivs is None:
+        derivs = command_derivatives(x_r, Ts, starts)
+    th = np.ascontiguousarray(theta, dtype=float)
+    fl = np.zeros(6, dtype=np.int64) if flags is None else np.ascontiguousarray(flags, dtype=np.int64)
+    e = np.zeros(N_EP) if ep is None else np.ascontiguousarray(ep, dtype=float)
+    md = np.zeros(4, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
+    if md.size < 4:
+        md = np.concatenate([md, np.zeros(4 - md.size, dtype=np.int64)])
+    if not (np.all(np.isfinite(th)) and np.all(np.isfinite(e))) or e[6] < 0.0 or e[6] > 1.0:
+        return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
+    if nsub is None:
+        f = e[3] if fl[2] else 0.0
+        if fl[0] and md[0] == 1 and not (fl[2] and md[3] == 1):
+            f = max(f, CONTACT_HZ)
+        nsub = substeps(th, Ts, f)
+    out = np.empty(n)
+    out_u = np.empty(n) if u_out is None else u_out
+    _kernel(
+        x_r,
+        np.ascontiguousarray(derivs[0], dtype=float),
+        np.ascontiguousarray(derivs[1], dtype=float),
+        np.ascontiguousarray(x0, dtype=float),
+        np.ascontiguousarray(starts, dtype=np.bool_),
+        float(Ts),
+        int(nsub),
+        th,
+        fl,
+        e,
+        md,
+        out,
+        out_u,
+    )
+    return out

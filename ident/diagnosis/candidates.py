@@ -1,0 +1,446 @@
+"""Candidate explanations: fit the augmented model with one (or more) effects by output error.
+
+For each effect of SPEC §7 (see :mod:`ident.diagnosis.augmented`):
+
+1. starting points on a coarse grid of the effect's main nonlinear parameter and variant,
+   led by the localisation (residual spectrum peaks for a resonance, the position
+   periodogram for a cyclic error, percentiles of |u| for a saturation), see
+   :func:`start_groups`;
+2. from each, a short fit of the base parameters with the effect held (a profile of the
+   cost over the effect's parameter: the base model identified without the effect has
+   adapted to it and must move back before the effect pays);
+3. from the best, the joint output-error fit of base and effect parameters (bounded
+   Levenberg–Marquardt, objective eq. 3.6 on the free-run simulation, weighted per segment).
+
+Every fit works in scaled coordinates ``z = p / s`` (s = |start| or a floor) so one finite-
+difference step suits parameters as different as a3 ≈ 1e6 1/s³ and b0 ≈ 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ident.diagnosis.augmented import (
+    CONTACT_HZ,
+    EFFECTS,
+    EP_INDEX,
+    N_EP,
+    command_derivatives,
+    simulate_augmented,
+    substeps,
+)
+
+__all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "start_groups",
+           "fit_effect", "effect_parameters", "PARAM_COUNT"]
+
+#: Parameters each effect adds (counted for the acceptance penalty).
+PARAM_COUNT = {
+    "backlash": 2,
+    "stribeck": 2,
+    "resonance": 3,
+    "time_delay": 1,
+    "cyclic_error": 3,
+    "saturation": 1,
+}
+_FREE = {
+    "backlash": ["gap_mm", "motor_fraction"],
+    "stribeck": ["static_to_coulomb_ratio", "stribeck_velocity_mm_s"],
+    "resonance": ["freq_hz", "damping", "gain", "motor_fraction"],
+    "time_delay": ["delay_s"],
+    "cyclic_error": ["period_mm", "amplitude_sin", "amplitude_cos"],
+    "saturation": ["limit"],
+}
+_MODE_SLOT = {"backlash": 0, "time_delay": 1, "cyclic_error": 2, "resonance": 3}
+
+
+@dataclass
+class Chunk:
+    """Samples a model is simulated on, and which of them count in the objective.
+
+    x_r, x : commanded and recorded actual position, mm; starts : first sample of each
+    segment (the simulation restarts there); derivs : commanded velocity (mm/s) and
+    acceleration (mm/s²); w : weight of each sample (1/√ of its segment's tracking-error
+    rms, so the low-speed set is heard next to the high-speed set); score : samples in the
+    objective — the free run always covers every sample, so held-out samples are simply
+    left out of ``score`` (the first ``skip_s`` after each restart never count).
+    """
+
+    x_r: np.ndarray
+    x: np.ndarray
+    Ts: float
+    starts: np.ndarray
+    derivs: tuple[np.ndarray, np.ndarray]
+    w: np.ndarray
+    score: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return int(self.x_r.size)
+
+    def scored(self, mask: np.ndarray) -> "Chunk":
+        """The same samples with only ``mask`` (and not the restart transients) scored."""
+        return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, self.w, self.score & mask)
+
+
+def make_chunk(x_r: np.ndarray, x: np.ndarray, Ts: float, starts: np.ndarray, skip_s: float = 0.02) -> Chunk:
+    """A :class:`Chunk` from arrays (mm) and a start mask; derivatives taken inside segments."""
+    x_r = np.ascontiguousarray(x_r, dtype=float)
+    x = np.ascontiguousarray(x, dtype=float)
+    starts = np.ascontiguousarray(starts, dtype=np.bool_)
+    derivs = command_derivatives(x_r, Ts, starts)
+    score = np.ones(x_r.size, dtype=bool)
+    k_skip = int(round(skip_s / Ts))
+    for s in np.flatnonzero(starts):
+        score[s : s + k_skip] = False
+    if not np.any(score):
+        score[:] = True
+    e = x_r - x
+    rms_all = float(np.std(e)) or 1.0
+    w = np.ones(x_r.size)
+    bounds = np.append(np.flatnonzero(starts), x_r.size)
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        rms = float(np.std(e[a:b]))
+        w[a:b] = np.sqrt(rms_all / max(rms, 1e-3 * rms_all))
+    return Chunk(x_r, x, float(Ts), starts, derivs, w, score)
+
+
+@dataclass
+class ModelSpec:
+    """Base parameters θ (eq. 3.3), effect flags/parameters/variants of the augmented model."""
+
+    theta: np.ndarray
+    effects: tuple[str, ...] = ()
+    ep: np.ndarray = field(default_factory=lambda: np.zeros(N_EP))
+    modes: np.ndarray = field(default_factory=lambda: np.zeros(4, dtype=np.int64))
+
+    def flags(self) -> np.ndarray:
+        return np.array([1 if e in self.effects else 0 for e in EFFECTS], dtype=np.int64)
+
+    def copy(self) -> "ModelSpec":
+        return ModelSpec(self.theta.copy(), tuple(self.effects), self.ep.copy(), self.modes.copy())
+
+
+def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None) -> np.ndarray:
+    """Free-run recorded position (mm) of ``spec`` on ``chunk``."""
+    return simulate_augmented(
+        chunk.x_r,
+        chunk.x,
+        chunk.Ts,
+        spec.theta,
+        flags=spec.flags(),
+        ep=spec.ep,
+        modes=spec.modes,
+        starts=chunk.starts,
+        derivs=chunk.derivs,
+        nsub=nsub,
+    )
+
+
+def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> np.ndarray:
+    """Weighted free-run residual w·(x̂ − x) on ``mask`` (default the scored samples), mm."""
+    m = chunk.score if mask is None else mask
+    return chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
+
+
+def sse(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> float:
+    """Weighted sum of squared free-run residuals, mm² (inf when the simulation diverges)."""
+    r = residual(spec, chunk, mask)
+    with np.errstate(all="ignore"):
+        v = float(r @ r)
+    return v if np.isfinite(v) else float("inf")
+
+
+def _nsub(spec: ModelSpec, Ts: float) -> int:
+    f = spec.ep[EP_INDEX["freq_hz"]] if "resonance" in spec.effects else 0.0
+    if "backlash" in spec.effects and spec.modes[0] == 1 and not ("resonance" in spec.effects and spec.modes[3] == 1):
+        f = max(f, CONTACT_HZ)
+    return substeps(spec.theta, Ts, 1.5 * f)
+
+
+def _bounds(name: str, p0: float, chunk: Chunk) -> tuple[float, float]:
+    Ts = chunk.Ts
+    vmax = float(np.max(np.abs(chunk.derivs[0]))) or 1.0
+    amax = float(np.max(np.abs(chunk.derivs[1]))) or 1.0
+    return {
+        "gap_mm": (0.0, 1.0),
+        "static_to_coulomb_ratio": (1.0, 20.0),
+        "stribeck_velocity_mm_s": (1e-4, vmax),
+        "freq_hz": (0.5, 0.45 / Ts),
+        "damping": (0.002, 1.5),
+        "gain": (-5.0, 5.0),
+        "delay_s": (0.0, 0.1),
+        "period_mm": (0.7 * p0, 1.4 * p0),
+        "amplitude_sin": (-np.inf, np.inf),
+        "amplitude_cos": (-np.inf, np.inf),
+        "limit": (1e-3 * amax, 100.0 * amax),
+        "motor_fraction": (0.2, 0.98),
+    }[name]
+
+
+def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
+             max_iter: int = 25) -> ModelSpec:
+    """Output-error fit (eq. 3.6 on the free-run simulation) of base and effect parameters.
+
+    Starts from ``spec``; base parameters move jointly with the effects' parameters when
+    ``fit_base``.  Returns the fitted copy; a fit that fails to improve returns ``spec``.
+    """
+    names = [p for e in spec.effects for p in _FREE[e]] if fit_effects else []
+    idx = [EP_INDEX[p] for p in names]
+    th0 = spec.theta.astype(float)
+    a2 = abs(th0[1]) or 1.0
+    a1 = abs(th0[0]) or 1.0
+    floors = np.array([1.0, 1.0, 1.0, 0.05, 0.01 * a1, 0.01 * a2, 1e-4 * a2, 1e-4 * a2])
+    s_th = np.maximum(np.abs(th0), floors)
+    ep0 = spec.ep.astype(float)
+    s_ep = []
+    lo, hi = [], []
+    for p, i in zip(names, idx):
+        b = _bounds(p, ep0[i], chunk)
+        floor = {"amplitude_sin": 1e-4, "amplitude_cos": 1e-4, "gain": 0.1, "delay_s": 1e-3,
+                 "gap_mm": 1e-3, "stribeck_velocity_mm_s": 0.1}.get(p, 1e-6)
+        s = max(abs(ep0[i]), floor)
+        if p.startswith("amplitude"):
+            s = max(abs(ep0[EP_INDEX["amplitude_sin"]]), abs(ep0[EP_INDEX["amplitude_cos"]]), floor)
+        s_ep.append(s)
+        lo.append(b[0] / s)
+        hi.append(b[1] / s)
+        ep0[i] = min(max(ep0[i], b[0]), b[1])
+    s_ep = np.array(s_ep)
+    nb = 8 if fit_base else 0
+    z0 = np.concatenate([th0[:nb] / s_th[:nb], ep0[idx] / s_ep if idx else []])
+    lb = np.concatenate([np.full(nb, -np.inf), lo]) if idx else np.full(nb, -np.inf)
+    ub = np.concatenate([np.full(nb, np.inf), hi]) if idx else np.full(nb, np.inf)
+    if z0.size == 0:
+        return spec.copy()
+    z0 = np.minimum(np.maximum(z0, lb), ub)
+    nsub = _nsub(spec, chunk.Ts)
+    m = chunk.score
+    w = chunk.w[m]
+    flags = spec.flags()
+
+    def unpack(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        th = th0.copy()
+        if nb:
+            th[:] = z[:8] * s_th
+        ep = ep0.copy()
+        if idx:
+            ep[idx] = z[nb:] * s_ep
+        return th, ep
+
+    def resid(z: np.ndarray) -> np.ndarray:
+        th, ep = unpack(z)
+        y = simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
+                               starts=chunk.starts, derivs=chunk.derivs, nsub=nsub)
+        r = w * (y[m] - chunk.x[m])
+        if not np.all(np.isfinite(r)):
+            return np.full(r.size, 1e3)
+        return r
+
+    with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
+        z, cost0 = _levenberg_marquardt(resid, z0, lb, ub, max_iter=max_iter)
+    if not np.isfinite(cost0):
+        return spec.copy()
+    th, ep = unpack(z)
+    out = spec.copy()
+    out.theta = th
+    out.ep = ep
+    return out
+
+
+def _levenberg_marquardt(resid, z0: np.ndarray, lb: np.ndarray, ub: np.ndarray, *, max_iter: int = 25,
+                         step: float = 1e-3, rtol: float = 1e-5) -> tuple[np.ndarray, float]:
+    """Bounded Levenberg–Marquardt on ½‖r(z)‖² with forward-difference Jacobian (step in z units).
+
+    Small and explicit because the residual vector is long (N samples) and the parameter
+    vector short (≤ 14): the normal equations JᵀJ (p×p) are cheap where an SVD of J is not.
+    Steps are projected onto the box [lb, ub].  The free-run cost is not smooth (friction
+    switching), so when no damping gives a descent the Jacobian is re-taken with a smaller
+    difference step and the damping reset before giving up.  Returns (z, ½‖r‖²).
+    """
+    z = z0.copy()
+    r = resid(z)
+    cost = 0.5 * float(r @ r)
+    lam = 1e-3
+    p = z.size
+    small = 0
+    fails = 0
+    h0 = step
+    for _ in range(max_iter):
+        J = np.empty((r.size, p))
+        for i in range(p):
+            h = h0 if z[i] + h0 <= ub[i] else -h0
+            zi = z.copy()
+            zi[i] += h
+            J[:, i] = (resid(zi) - r) / h
+        A = J.T @ J
+        g = J.T @ r
+        d = np.diag(A).copy()
+        d[d <= 0] = 1e-12
+        improved = False
+        for _t in range(6):
+            try:
+                delta = np.linalg.solve(A + lam * np.diag(d), -g)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            if not np.all(np.isfinite(delta)):
+                lam *= 10.0
+                continue
+            zn = np.minimum(np.maximum(z + delta, lb), ub)
+            rn = resid(zn)
+            cn = 0.5 * float(rn @ rn)
+            if np.isfinite(cn) and cn < cost:
+                rel = (cost - cn) / cost if cost > 0 else 0.0
+                z, r, cost = zn, rn, cn
+                lam = max(lam / 5.0, 1e-9)
+                improved = True
+                small = small + 1 if rel < rtol else 0
+                break
+            lam *= 6.0
+        if improved:
+            fails = 0
+            h0 = step
+            if small >= 2:
+                break
+        else:
+            fails += 1
+            if fails >= 2:
+                break
+            lam = 1e-3
+            h0 = step * 0.1
+    return z, cost
+
+
+def _apply(spec: ModelSpec, effect: str, params: dict, modes: dict) -> ModelSpec:
+    s = spec.copy()
+    s.effects = tuple(dict.fromkeys(spec.effects + (effect,)))
+    for k, v in params.items():
+        s.ep[EP_INDEX[k]] = v
+    for k, v in modes.items():
+        s.modes[_MODE_SLOT[k]] = v
+    return s
+
+
+def start_groups(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict) -> list[list[ModelSpec]]:
+    """Starting points for ``effect`` on top of ``spec``, grouped by its main parameter.
+
+    Each group holds the variants for one value of the effect's main nonlinear parameter
+    (gap, static ratio, frequency, delay, period, limit); the best of a group (base held)
+    is refined jointly with the base parameters for a few iterations before the groups are
+    compared — the base model identified without the effect has adapted to it, so the
+    effect only pays once the base parameters move back.  ``evidence`` is the localisation
+    of :func:`ident.diagnosis.residuals.localise` (spectrum peaks, position period).
+    """
+    Ts = chunk.Ts
+    vmax = float(np.max(np.abs(chunk.derivs[0]))) or 1.0
+    groups: list[list[tuple[dict, dict]]] = []
+    if effect == "backlash":
+        for g in (0.003, 0.01, 0.03, 0.08):
+            groups.append([({"gap_mm": g, "motor_fraction": 0.8}, {"backlash": mode}) for mode in (0, 1)])
+    elif effect == "stribeck":
+        for r in (1.5, 3.0):
+            groups.append([({"static_to_coulomb_ratio": r, "stribeck_velocity_mm_s": v}, {})
+                           for v in (0.2, 1.0, 0.02 * vmax)])
+    elif effect == "resonance":
+        fs = [p["freq_hz"] for p in evidence.get("spectrum_peaks", [])[:2] if p["freq_hz"] > 20.0]
+        for f in list(np.geomspace(60.0, 0.3 / Ts, 3)):
+            if all(abs(np.log(f / c)) > 0.2 for c in fs):
+                fs.append(float(f))
+        for f in fs:
+            groups.append([({"freq_hz": f, "damping": 0.05, "gain": 1.0, "motor_fraction": 0.8}, {"resonance": 0}),
+                           ({"freq_hz": f, "damping": 0.3, "gain": 1.0, "motor_fraction": 0.8}, {"resonance": 1})])
+    elif effect == "time_delay":
+        for d in (0.7, 1.5, 3.0, 6.0):
+            groups.append([({"delay_s": d * Ts}, {"time_delay": mode}) for mode in (0, 1)])
+    elif effect == "cyclic_error":
+        per = evidence.get("position_periodic", {})
+        pg = evidence.get("position_periodogram_")
+        cands: list[float] = []
+        if pg is not None:
+            periods, share = pg
+            for i in np.argsort(share)[::-1]:
+                if all(abs(np.log(periods[i] / c)) > 0.1 for c in cands):
+                    cands.append(float(periods[i]))
+                if len(cands) >= 3:
+                    break
+        if not cands:
+            cands = [per.get("period_mm") or 1.0]
+        amp = max(per.get("amplitude_mm", 0.0), 1e-4)
+        a2 = abs(spec.theta[1]) or 1.0
+        for P in cands:
+            phases = (0.0, 0.5 * np.pi, np.pi, 1.5 * np.pi)
+            groups.append([({"period_mm": P, "amplitude_sin": amp * np.cos(ph), "amplitude_cos": amp * np.sin(ph)},
+                            {"cyclic_error": 0}) for ph in phases])
+            groups.append([({"period_mm": P, "amplitude_sin": a2 * amp * np.cos(ph),
+                             "amplitude_cos": a2 * amp * np.sin(ph)}, {"cyclic_error": 1}) for ph in phases])
+    elif effect == "saturation":
+        u = np.empty(chunk.n)
+        simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, spec.theta, flags=spec.flags(), ep=spec.ep,
+                           modes=spec.modes, starts=chunk.starts, derivs=chunk.derivs, u_out=u)
+        au = np.abs(u[np.isfinite(u)])
+        for q in (99.9, 99.0, 96.0):
+            groups.append([({"limit": float(np.percentile(au, q))}, {})])
+    else:
+        raise ValueError(f"unknown effect {effect!r}")
+    return [[_apply(spec, effect, p, m) for p, m in g] for g in groups]
+
+
+def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, short_iter: int = 3,
+               max_iter: int = 20) -> ModelSpec:
+    """``spec`` plus ``effect``, fitted by output error on ``chunk`` (base parameters too).
+
+    Every variant that only differs in the effect's main parameter or variant gets a short
+    fit of the base parameters with the effect held there (a profile of the cost over the
+    effect's main parameter; phases of a cyclic error are chosen with the base held); the
+    full joint fit continues from the best of those.
+    """
+    best, best_v = None, np.inf
+    for group in start_groups(spec, effect, chunk, evidence):
+        if effect == "cyclic_error":
+            vals = [sse(s, chunk) for s in group]
+            group = [group[int(np.argmin(vals))]]
+        for s0 in group:
+            if not np.isfinite(sse(s0, chunk)):
+                continue
+            # profile step: the base re-adapts to the effect held at its start value
+            s1 = fit_spec(s0, chunk, fit_effects=False, max_iter=short_iter)
+            v = sse(s1, chunk)
+            if v < best_v:
+                best, best_v = s1, v
+    if best is None:
+        return _apply(spec, effect, {}, {})
+    return fit_spec(fit_spec(best, chunk, max_iter=max_iter), chunk, max_iter=max_iter)
+
+
+def effect_parameters(spec: ModelSpec, effect: str) -> dict:
+    """The effect's parameters in the words of SPEC §7, with units in the key names."""
+    ep = spec.ep
+    if effect == "backlash":
+        out = {"gap_mm": float(ep[0]), "loop": "table_fed_back" if spec.modes[0] else "table_recorded"}
+        if spec.modes[0]:
+            out["motor_fraction"] = float(ep[11])
+        return out
+    if effect == "stribeck":
+        return {"static_to_coulomb_ratio": float(ep[1]), "stribeck_velocity_mm_s": float(ep[2])}
+    if effect == "resonance":
+        if spec.modes[3]:
+            return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "motor_fraction": float(ep[11]),
+                    "kind": "two_mass"}
+        return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "gain": float(ep[5]), "kind": "output_filter"}
+    if effect == "time_delay":
+        return {"delay_s": float(ep[6]), "where": "actuation" if spec.modes[1] else "capture"}
+    if effect == "cyclic_error":
+        amp = float(np.hypot(ep[8], ep[9]))
+        kind = "disturbance" if spec.modes[2] else "position_error"
+        return {
+            "period_mm": float(ep[7]),
+            "amplitude": amp,
+            "amplitude_unit": "mm/s^2" if spec.modes[2] else "mm",
+            "phase_rad": float(np.arctan2(ep[9], ep[8])),
+            "kind": kind,
+        }
+    if effect == "saturation":
+        return {"limit": float(ep[10]), "limit_unit": "mm/s^2"}
+    raise ValueError(f"unknown effect {effect!r}")

@@ -1,0 +1,321 @@
+"""Where the free-run residual concentrates, and whether what is left is white (issue 5, step 2).
+
+The residual is ``r = e − ê = x̂ − x`` (mm): recorded tracking error minus the model's
+free-run tracking error (SPEC §5).  :func:`localise` measures it
+
+* in time — the worst windows, with timestamps;
+* by operating condition — commanded speed bins, time since the last reversal, time since
+  the last acceleration change (jerk event), commanded acceleration bins, position along
+  the axis and a periodogram of the residual against position;
+* in frequency — Welch spectrum peaks and coherence with the commanded acceleration;
+* for whiteness — autocorrelation of r and cross-correlation with the commanded velocity
+  with 99 % confidence bounds ±2.58/√N, as in system-identification residual analysis
+  (Ljung, *System Identification*, §16.6).
+
+Every figure is a plain float/list so the result drops straight into the JSON of SPEC §6.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import signal
+
+__all__ = [
+    "reversal_times",
+    "time_since",
+    "energy_share",
+    "worst_windows",
+    "position_periodogram",
+    "spectrum_peaks",
+    "whiteness",
+    "localise",
+]
+
+_Z99 = 2.576  # two-sided 99 % normal quantile
+
+
+def reversal_times(v_r: np.ndarray, starts: np.ndarray, v_eps: float) -> np.ndarray:
+    """Indices where the commanded direction of motion reverses (dwells in between ignored).
+
+    Parameters
+    ----------
+    v_r : commanded velocity, mm/s.
+    starts : first sample of each segment (bool mask); direction memory resets there.
+    v_eps : speed below which the axis counts as at rest, mm/s.
+    """
+    idx = []
+    last = 0
+    for k in range(v_r.size):
+        if starts[k]:
+            last = 0
+        s = 1 if v_r[k] > v_eps else (-1 if v_r[k] < -v_eps else 0)
+        if s != 0:
+            if last != 0 and s != last:
+                idx.append(k)
+            last = s
+    return np.asarray(idx, dtype=np.int64)
+
+
+def time_since(events: np.ndarray, n: int, Ts: float) -> np.ndarray:
+    """Time since the latest event at or before each sample, s (inf before the first)."""
+    out = np.full(n, np.inf)
+    if events.size == 0:
+        return out
+    k = np.arange(n)
+    pos = np.searchsorted(events, k, side="right") - 1
+    ok = pos >= 0
+    out[ok] = (k[ok] - events[pos[ok]]) * Ts
+    return out
+
+
+def energy_share(r: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    """(share of residual energy, share of time) inside ``mask``."""
+    tot = float(np.sum(r * r))
+    if tot == 0.0 or r.size == 0:
+        return 0.0, float(np.mean(mask)) if r.size else 0.0
+    return float(np.sum(r[mask] ** 2) / tot), float(np.mean(mask))
+
+
+def worst_windows(r: np.ndarray, t: np.ndarray, width_s: float, count: int = 5) -> list[dict]:
+    """The ``count`` non-overlapping windows of ``width_s`` s with the most residual energy."""
+    n = r.size
+    Ts = float(np.median(np.diff(t))) if n > 1 else 1.0
+    w = max(1, int(round(width_s / Ts)))
+    if n < w:
+        w = n
+    c = np.concatenate([[0.0], np.cumsum(r * r)])
+    e = c[w:] - c[:-w]
+    tot = float(c[-1]) or 1.0
+    taken = np.zeros(e.size, dtype=bool)
+    out = []
+    order = np.argsort(e)[::-1]
+    for i in order:
+        if len(out) >= count:
+            break
+        if taken[i]:
+            continue
+        out.append(
+            {
+                "t_start_s": float(t[i]),
+                "t_end_s": float(t[min(i + w - 1, n - 1)]),
+                "energy_share": float(e[i] / tot),
+                "rms_mm": float(np.sqrt(e[i] / w)),
+            }
+        )
+        taken[max(0, i - w + 1) : i + w] = True
+    return out
+
+
+def _bins(values: np.ndarray, r: np.ndarray, edges: list[float], unit: str) -> list[dict]:
+    tot = float(np.sum(r * r)) or 1.0
+    rows = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        m = (values >= lo) & (values < hi)
+        if not np.any(m):
+            continue
+        rows.append(
+            {
+                f"from_{unit}": float(lo),
+                f"to_{unit}": float(hi) if np.isfinite(hi) else None,
+                "time_share": float(np.mean(m)),
+                "energy_share": float(np.sum(r[m] ** 2) / tot),
+                "rms_mm": float(np.sqrt(np.mean(r[m] ** 2))),
+            }
+        )
+    return rows
+
+
+def position_periodogram(
+    x: np.ndarray, r: np.ndarray, periods_mm: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Share of residual variance explained by ``c_s sin(2πx/P) + c_c cos(2πx/P)`` per period P.
+
+    A least-squares (Lomb–Scargle-like) periodogram of the residual against position, mm;
+    returns (explained share per period, complex amplitude c_s + j·c_c per period, mm).
+    """
+    rc = r - r.mean()
+    den = float(rc @ rc) or 1.0
+    share = np.zeros(periods_mm.size)
+    amp = np.zeros(periods_mm.size, dtype=complex)
+    for i, P in enumerate(periods_mm):
+        ph = 2.0 * np.pi * x / P
+        A = np.column_stack([np.sin(ph), np.cos(ph), np.ones_like(x)])
+        coef, *_ = np.linalg.lstsq(A, rc, rcond=None)
+        fit = A @ coef
+        share[i] = float(fit @ fit) / den
+        amp[i] = coef[0] + 1j * coef[1]
+    return share, amp
+
+
+def spectrum_peaks(r: np.ndarray, Ts: float, count: int = 3, f_min: float = 2.0) -> tuple[list[dict], np.ndarray, np.ndarray]:
+    """Welch spectrum of r and its ``count`` strongest local peaks above ``f_min`` Hz.
+
+    Each peak: frequency (Hz), share of residual power in ±10 % around it, and its
+    prominence over the spectrum's median (ratio).
+    """
+    nper = int(min(r.size, max(256, 2 ** int(np.log2(max(r.size // 8, 256))))))
+    f, P = signal.welch(r - r.mean(), fs=1.0 / Ts, nperseg=nper)
+    tot = float(np.sum(P)) or 1.0
+    med = float(np.median(P[f >= f_min])) if np.any(f >= f_min) else 1.0
+    peaks, _ = signal.find_peaks(P)
+    peaks = [p for p in peaks if f[p] >= f_min]
+    peaks.sort(key=lambda p: P[p], reverse=True)
+    rows = []
+    for p in peaks[:count]:
+        band = (f >= 0.9 * f[p]) & (f <= 1.1 * f[p])
+        rows.append(
+            {
+                "freq_hz": float(f[p]),
+                "power_share": float(np.sum(P[band]) / tot),
+                "prominence": float(P[p] / med) if med > 0 else float("inf"),
+            }
+        )
+    return rows, f, P
+
+
+def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
+    a = a - a.mean()
+    b = b - b.mean()
+    den = float(np.sqrt((a @ a) * (b @ b))) or 1.0
+    n = a.size
+    out = np.empty(lags.size)
+    for i, L in enumerate(lags):
+        if L >= 0:
+            out[i] = float(a[L:] @ b[: n - L]) / den
+        else:
+            out[i] = float(a[: n + L] @ b[-L:]) / den
+    return out
+
+
+def whiteness(r: np.ndarray, u: np.ndarray, max_lag: int = 50) -> dict:
+    """Residual autocorrelation and cross-correlation with the command, 99 % bounds.
+
+    Returns the bound ±2.58/√N, the fractions of lags 1..M (auto) and −M..M (cross)
+    outside it, the worst lags, and the booleans ``white`` / ``uncorrelated_with_command``
+    (at most 1 % of lags outside, as the bound allows by chance).
+    """
+    n = r.size
+    bound = _Z99 / np.sqrt(max(n, 1))
+    lags = np.arange(0, max_lag + 1)
+    acf = _xcorr(r, r, lags)
+    xl = np.arange(-max_lag, max_lag + 1)
+    ccf = _xcorr(r, u, xl)
+    out_a = np.abs(acf[1:]) > bound
+    out_c = np.abs(ccf) > bound
+    ic = int(np.argmax(np.abs(ccf)))
+    return {
+        "bound_99": float(bound),
+        "autocorrelation_outside": float(np.mean(out_a)),
+        "autocorrelation_lag1": float(acf[1]) if acf.size > 1 else 0.0,
+        "cross_correlation_outside": float(np.mean(out_c)),
+        "cross_correlation_peak": float(ccf[ic]),
+        "cross_correlation_peak_lag_samples": int(xl[ic]),
+        "white": bool(np.mean(out_a) <= 0.01),
+        "uncorrelated_with_command": bool(np.mean(out_c) <= 0.01),
+        "acf": acf,
+        "ccf": ccf,
+    }
+
+
+def localise(
+    r: np.ndarray,
+    x_r: np.ndarray,
+    x: np.ndarray,
+    v_r: np.ndarray,
+    a_r: np.ndarray,
+    Ts: float,
+    starts: np.ndarray,
+) -> dict:
+    """The full localisation of residual ``r`` (mm) for the JSON "mismatch" block.
+
+    Parameters
+    ----------
+    r : residual e − ê = x̂ − x, mm.
+    x_r, x : commanded and recorded actual position, mm.
+    v_r, a_r : commanded velocity (mm/s) and acceleration (mm/s²).
+    Ts : sample period, s.
+    starts : first sample of each segment (bool mask).
+
+    Keys ending in ``_`` hold arrays for plots and are dropped from the JSON.
+    """
+    n = r.size
+    t = np.arange(n) * Ts
+    vmax = float(np.max(np.abs(v_r))) or 1.0
+    amax = float(np.max(np.abs(a_r))) or 1.0
+    v_eps = max(1e-3 * vmax, 1e-6)
+    tot = float(np.sum(r * r))
+    res: dict = {"rms_mm": float(np.sqrt(tot / max(n, 1))), "duration_s": float(n * Ts)}
+
+    res["worst_windows"] = worst_windows(r, t, 0.05)
+
+    speed = np.abs(v_r)
+    edges = [0.0, v_eps, 0.01 * vmax, 0.1 * vmax, 0.3 * vmax, 0.6 * vmax, np.inf]
+    res["by_speed"] = _bins(speed, r, edges, "mm_s")
+    moving = speed > v_eps
+    low = moving & (speed < 0.1 * vmax)
+    res["low_speed_share"], res["low_speed_time_share"] = energy_share(r, low)
+    res["at_rest_share"], res["at_rest_time_share"] = energy_share(r, ~moving)
+
+    rev = reversal_times(v_r, starts, v_eps)
+    res["reversals"] = int(rev.size)
+    since_rev = time_since(rev, n, Ts)
+    res["by_time_since_reversal"] = _bins(
+        since_rev, r, [0.0, 0.01, 0.03, 0.1, 0.3, np.inf], "s"
+    )
+    res["after_reversal_30ms_share"], res["after_reversal_30ms_time_share"] = energy_share(r, since_rev < 0.03)
+    res["after_reversal_100ms_share"], res["after_reversal_100ms_time_share"] = energy_share(r, since_rev < 0.1)
+
+    da = np.abs(np.diff(a_r, prepend=a_r[0]))
+    jerk_ev = np.flatnonzero(da > 0.2 * amax)
+    since_jerk = time_since(jerk_ev, n, Ts)
+    res["after_jerk_30ms_share"], res["after_jerk_30ms_time_share"] = energy_share(r, since_jerk < 0.03)
+    res["by_acceleration"] = _bins(
+        np.abs(a_r), r, [0.0, 0.05 * amax, 0.5 * amax, 0.9 * amax, np.inf], "mm_s2"
+    )
+    res["high_acceleration_share"], res["high_acceleration_time_share"] = energy_share(
+        r, np.abs(a_r) >= 0.9 * amax
+    )
+    # speed dependence outside the first 100 ms after reversals: ratio of rms, fast vs slow half
+    steady = moving & (since_rev >= 0.1)
+    if np.count_nonzero(steady) > 20:
+        med = float(np.median(speed[steady]))
+        fast = steady & (speed >= med)
+        slow = steady & (speed < med)
+        rf = float(np.sqrt(np.mean(r[fast] ** 2))) if np.any(fast) else 0.0
+        rs = float(np.sqrt(np.mean(r[slow] ** 2))) if np.any(slow) else 0.0
+        res["fast_to_slow_rms_ratio"] = rf / rs if rs > 0 else float("inf")
+    else:
+        res["fast_to_slow_rms_ratio"] = 1.0
+
+    # position along the axis, and a periodogram against position
+    lo, hi = float(np.min(x)), float(np.max(x))
+    span = hi - lo
+    pedges = list(np.linspace(lo, hi + 1e-9, 6)) if span > 0 else [lo, lo + 1.0]
+    res["by_position"] = _bins(x, r, pedges, "mm")
+    if span > 0:
+        p_min = max(4.0 * float(np.median(np.abs(np.diff(x))[moving[1:]] if np.any(moving[1:]) else [1e-3])), 0.05)
+        p_min = max(p_min, span / 2000.0)
+        periods = np.geomspace(p_min, max(span, p_min * 1.5), 300)
+        share, amp = position_periodogram(x, r, periods)
+        i = int(np.argmax(share))
+        res["position_periodic"] = {
+            "period_mm": float(periods[i]),
+            "explained_share": float(share[i]),
+            "amplitude_mm": float(abs(amp[i])),
+            "median_share": float(np.median(share)),
+        }
+        res["position_periodogram_"] = (periods, share)
+    else:
+        res["position_periodic"] = {"period_mm": 0.0, "explained_share": 0.0, "amplitude_mm": 0.0, "median_share": 0.0}
+
+    peaks, f, P = spectrum_peaks(r, Ts)
+    res["spectrum_peaks"] = peaks
+    res["spectrum_"] = (f, P)
+    if n >= 512:
+        fc, coh = signal.coherence(a_r, r, fs=1.0 / Ts, nperseg=min(1024, n // 4))
+        res["coherence_with_command_mean"] = float(np.mean(coh[fc > 1.0])) if np.any(fc > 1.0) else 0.0
+        res["coherence_"] = (fc, coh)
+    else:
+        res["coherence_with_command_mean"] = 0.0
+    res["whiteness"] = whiteness(r, v_r)
+    return res

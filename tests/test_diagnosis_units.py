@@ -1,0 +1,216 @@
+"""Building blocks of the mismatch diagnosis: the augmented simulator and the localisation.
+
+Test data come from the augmented simulator itself on a random point-to-point command, so
+each property is checked against a known truth.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from agent.errors import InputError
+from ident.diagnosis import diagnose
+from ident.diagnosis.augmented import EP_INDEX, N_EP, segment_starts, simulate_augmented
+from ident.diagnosis.candidates import ModelSpec, fit_spec, make_chunk, sse
+from ident.diagnosis.residuals import localise, position_periodogram, reversal_times, whiteness, worst_windows
+
+Ts = 0.001
+# P-PI drive of thesis Table 3.3 ("Actual" column), eq. 3.3 parameters
+THETA = np.array([372.76, 62009.83, 1527104.87, 0.0, 0.0, 11106.33, 441.0, -302.0])
+
+
+def point_to_point(seed: int, T: float = 3.0, span: float = 5.0, v_max: float = 100.0, a_max: float = 2000.0) -> np.ndarray:
+    """A random trapezoidal point-to-point command, mm, sampled every Ts."""
+    rng = np.random.default_rng(seed)
+    n = int(T / Ts)
+    out = np.zeros(n)
+    k, x = 0, 0.0
+    while k < n:
+        tgt = rng.uniform(-span, span)
+        D = abs(tgt - x)
+        ta = min(v_max / a_max, np.sqrt(D / a_max))
+        vp = a_max * ta
+        tc = max(D - vp * ta, 0.0) / vp if vp > 0 else 0.0
+        tt = 2 * ta + tc
+        tau = np.minimum(np.arange(1, max(int(np.ceil(tt / Ts)), 1) + 1) * Ts, tt)
+        pos = np.where(tau < ta, 0.5 * a_max * tau**2,
+                       np.where(tau < ta + tc, 0.5 * a_max * ta**2 + vp * (tau - ta), D - 0.5 * a_max * (tt - tau) ** 2))
+        seg = x + np.sign(tgt - x) * pos
+        e = min(n, k + seg.size)
+        out[k:e] = seg[: e - k]
+        k, x = e, tgt
+        dwell = int(rng.integers(5, 40))
+        out[k : k + dwell] = x
+        k += dwell
+    return out
+
+
+def sim(x_r: np.ndarray, effects: dict[str, float] | None = None, modes=(0, 0, 0)) -> np.ndarray:
+    ep = np.zeros(N_EP)
+    flags = np.zeros(6, dtype=np.int64)
+    names = {"gap_mm": 0, "static_to_coulomb_ratio": 1, "stribeck_velocity_mm_s": 1, "freq_hz": 2, "damping": 2,
+             "gain": 2, "delay_s": 3, "period_mm": 4, "amplitude_sin": 4, "amplitude_cos": 4, "limit": 5}
+    for k, v in (effects or {}).items():
+        ep[EP_INDEX[k]] = v
+        flags[names[k]] = 1
+    return simulate_augmented(x_r, x_r, Ts, THETA, flags=flags, ep=ep, modes=np.array(modes))
+
+
+@pytest.fixture(scope="module")
+def x_r() -> np.ndarray:
+    return point_to_point(3)
+
+
+def test_effects_switched_off_or_zero_give_the_base_model(x_r):
+    base = sim(x_r)
+    assert np.allclose(sim(x_r, {"gap_mm": 0.0}), base, atol=1e-12)
+    assert np.allclose(sim(x_r, {"delay_s": 0.0}), base, atol=1e-12)
+    assert np.allclose(sim(x_r, {"static_to_coulomb_ratio": 1.0, "stribeck_velocity_mm_s": 1.0}), base, atol=1e-12)
+
+
+def test_base_model_follows_the_command_and_settles_on_it(x_r):
+    held = np.concatenate([x_r, np.full(2000, x_r[-1])])  # 2 s at rest after the last move
+    x = sim(held)
+    e = held - x
+    assert np.all(np.isfinite(x))
+    assert np.max(np.abs(e)) < 5.0  # mm: the P-PI drive of Table 3.3 lags but follows
+    assert abs(e[-1]) < 0.01  # the integral action removes the friction offset
+
+
+def test_capture_delay_shifts_the_recorded_position(x_r):
+    base = sim(x_r)
+    delayed = sim(x_r, {"delay_s": 0.005}, modes=(0, 0, 0))
+    assert np.allclose(delayed[100:], base[95:-5], atol=1e-9)
+
+
+def test_backlash_output_stays_within_half_the_gap_of_the_motor(x_r):
+    gap = 0.02
+    base = sim(x_r)
+    table = sim(x_r, {"gap_mm": gap}, modes=(0, 0, 0))
+    assert np.max(np.abs(table - base)) <= gap / 2 + 1e-12
+    assert np.max(np.abs(table - base)) > 0.9 * gap / 2
+
+
+def test_cyclic_position_error_adds_a_sine_of_position(x_r):
+    base = sim(x_r)
+    y = sim(x_r, {"period_mm": 2.0, "amplitude_sin": 0.003}, modes=(0, 0, 0))
+    assert np.allclose(y - base, 0.003 * np.sin(2 * np.pi * base / 2.0), atol=1e-12)
+
+
+def test_saturation_slows_the_fastest_moves(x_r):
+    u = np.empty(x_r.size)
+    simulate_augmented(x_r, x_r, Ts, THETA, nsub=8, u_out=u)
+    limited = sim(x_r, {"limit": 0.5 * np.max(np.abs(u))})
+    assert np.linalg.norm(limited - sim(x_r)) > 1e-3
+
+
+def test_output_error_fit_recovers_a_perturbed_base_model(x_r):
+    x = sim(x_r)
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    start = ModelSpec(THETA * np.array([1.1, 0.9, 1.1, 1, 1, 0.95, 1.2, 0.8]))
+    fitted = fit_spec(fit_spec(start, chunk, max_iter=30), chunk, max_iter=30)
+    assert sse(fitted, chunk) < 1e-3 * sse(start, chunk)
+
+
+def test_reversals_are_found_where_the_commanded_direction_changes():
+    v = np.array([0, 1, 1, 0, 0, 1, -1, -1, 0, -1, 1.0])
+    idx = reversal_times(v, segment_starts(v.size, None), 0.5)
+    assert idx.tolist() == [6, 10]
+
+
+def test_worst_windows_point_at_the_burst():
+    r = np.zeros(1000)
+    r[600:620] = 1.0
+    w = worst_windows(r, np.arange(1000) * Ts, 0.05, count=2)
+    assert w[0]["t_start_s"] <= 0.600 and w[0]["t_end_s"] >= 0.619
+    assert w[0]["energy_share"] == pytest.approx(1.0)
+
+
+def test_position_periodogram_finds_the_period():
+    x = np.linspace(-5, 5, 4000)
+    r = 0.002 * np.sin(2 * np.pi * x / 1.7 + 0.3) + 1e-4 * np.random.default_rng(0).standard_normal(x.size)
+    periods = np.geomspace(0.5, 5, 400)
+    share, _ = position_periodogram(x, r, periods)
+    assert periods[np.argmax(share)] == pytest.approx(1.7, rel=0.02)
+    assert share.max() > 0.95
+
+
+def test_whiteness_passes_noise_and_fails_a_smooth_residual():
+    rng = np.random.default_rng(1)
+    u = rng.standard_normal(5000)
+    assert whiteness(rng.standard_normal(5000), u)["white"]
+    smooth = np.convolve(rng.standard_normal(5000), np.ones(50) / 50, mode="same")
+    res = whiteness(smooth, u)
+    assert not res["white"]
+    assert res["autocorrelation_lag1"] > 0.9
+
+
+def test_localise_concentrates_a_reversal_residual_after_reversals(x_r):
+    v = np.gradient(x_r, Ts)
+    a = np.gradient(v, Ts)
+    starts = segment_starts(x_r.size, None)
+    rev = reversal_times(v, starts, 1e-3)
+    r = np.zeros_like(x_r)
+    for k in rev:
+        r[k : k + 20] = 1e-3
+    loc = localise(r, x_r, x_r, v, a, Ts, starts)
+    assert loc["after_reversal_30ms_share"] > 0.95
+    assert loc["after_reversal_30ms_time_share"] < 0.5
+
+
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"x": np.zeros(10)}, "samples"),
+        ({"Ts": -1.0}, "sample period"),
+        ({"x": np.full(3000, np.nan)}, "NaN"),
+        ({"model": {"a1": 1.0}}, "parameters"),
+    ],
+)
+def test_bad_input_gives_a_one_line_error(x_r, kwargs, match):
+    args = {"x_r": x_r, "x": x_r.copy(), "Ts": Ts, "model": dict(zip(("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1"), THETA))}
+    args.update(kwargs)
+    with pytest.raises(InputError, match=match) as exc:
+        diagnose(args.pop("x_r"), args.pop("x"), args.pop("Ts"), args.pop("model"))
+    assert "\n" not in str(exc.value)
+
+
+def _recording(seed: int, effects: dict[str, float] | None = None, modes=(0, 0, 0), noise: float = 5e-5):
+    """A 3 s 'recording' of the augmented model itself: command, actual + encoder noise (mm)."""
+    x_r = point_to_point(seed)
+    x = sim(x_r, effects, modes) + noise * np.random.default_rng(seed).standard_normal(x_r.size)
+    return x_r, x
+
+
+MODEL = dict(zip(("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1"), THETA))
+
+
+def test_clean_model_data_give_none_and_a_complete_json():
+    x_r, x = _recording(11)
+    val = _recording(12)
+    d = diagnose(x_r, x, Ts, MODEL, validation=(val[0], val[1], None))
+    assert d.verdict == "none", d.summary
+    js = d.to_dict()
+    assert js["verdict"] == "none" and len(js["candidates"]) >= 6
+    assert "Left out: none" in d.summary
+
+
+def test_a_position_periodic_disturbance_is_named_with_its_period():
+    fx = {"period_mm": 2.5, "amplitude_sin": 400.0}
+    x_r, x = _recording(21, fx, modes=(0, 0, 1))
+    val = _recording(22, fx, modes=(0, 0, 1))
+    d = diagnose(x_r, x, Ts, MODEL, validation=(val[0], val[1], None))
+    assert d.verdict == "cyclic_error", d.summary
+    cand = [c for c in d.candidates if c.accepted][0]
+    assert cand.parameters["period_mm"] == pytest.approx(2.5, rel=0.05)
+    assert d.fit_after_pct > d.fit_before_pct
+    assert "cyclic error" in d.summary
+
+
+def test_against_a_simulated_recording_localises_their_difference():
+    x_r, x = _recording(31)
+    other = sim(x_r, {"delay_s": 0.004}, modes=(0, 0, 0))
+    d = diagnose(x_r, x, Ts, MODEL, against=other, effects=("time_delay",))
+    assert d.mismatch["compared_with"] == "simulated recording"
+    assert d.mismatch["rms_mm"] == pytest.approx(float(np.sqrt(np.mean((other - x) ** 2))), rel=1e-9)
