@@ -161,7 +161,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, val: Recording | Non
     diagnosis = None
     if opts.diagnose:
         t0 = time.perf_counter()
-        diagnosis = _diagnose(rec, axis, model, reg.shift, val, against)
+        diagnosis = _diagnose(rec, axis, model, val, against)
         timings["diagnosis"] = time.perf_counter() - t0
 
     return AxisResult(
@@ -175,8 +175,13 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, val: Recording | Non
     )
 
 
-def _diagnose(rec: Recording, axis: str, model: DriveModel, shift: int, val: Recording | None,
-              against: Recording | None):
+def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | None, against: Recording | None):
+    """Run the diagnosis on the command *as recorded*.
+
+    The preview shift of the identification is deliberately not applied: a dead time is
+    one of the effects the diagnosis looks for, and a shift would hide it.  The diagnosis
+    re-fits the base model in its own simulator before trying any effect.
+    """
     try:
         from ident.diagnosis import diagnose
     except ModuleNotFoundError:  # diagnosis package not installed in this build
@@ -185,14 +190,14 @@ def _diagnose(rec: Recording, axis: str, model: DriveModel, shift: int, val: Rec
     validation = None
     if val is not None:
         vt = val.axes[axis]
-        validation = (shift_command(vt.commanded, shift, val.segment), vt.actual, val.segment)
+        validation = (vt.commanded, vt.actual, val.segment)
     sim_actual = None
     if against is not None:
         if axis not in against.axes or against.n_samples != rec.n_samples:
             raise InputError(f"--against: the simulated log must hold axis {axis} with the same "
                              f"{rec.n_samples} samples as the recording (it has {against.n_samples})")
         sim_actual = against.axes[axis].actual
-    return diagnose(shift_command(tr.commanded, shift, rec.segment), tr.actual, rec.sample_period, model,
+    return diagnose(tr.commanded, tr.actual, rec.sample_period, model,
                     segment=rec.segment, validation=validation, against=sim_actual)
 
 
