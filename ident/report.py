@@ -143,22 +143,29 @@ def _diagnosis_plots(r: AxisResult) -> str:
         ax.legend(fontsize=8)
         ax.set_title(f"axis {r.axis}: residual before / after the diagnosed physics is added")
         out.append(_png(fig))
-    if t is not None and "e" in traces and "e_hat_before" in traces and "e_hat_after" in traces:
-        sl = slice(0, len(t))
-        e = traces["e"]
-        n = len(t)
-        w = min(n, 1000)
-        k = int(np.argmax(np.convolve(np.abs(e - traces["e_hat_before"]), np.ones(w), "valid"))) if n > w else 0
+    # Before/after overlay of the tracking error where the base model misses most,
+    # on the held-out (validation) recording when there is one.
+    pre = "validation_" if "validation_x_hat_after" in traces else ""
+    keys = [pre + k for k in ("t", "x_r", "x", "x_hat_before", "x_hat_after")]
+    if all(k in traces for k in keys):
+        tt, xr, x, xb, xa = (np.asarray(traces[k]) for k in keys)
+        # residuals e − ê = x̂ − x, µm: the tracking error itself is mm-sized and would hide them
+        rb, ra = (xb - x) * 1e3, (xa - x) * 1e3
+        n = len(tt)
+        w = min(n, 300)
+        gain = np.abs(rb) - np.abs(ra)
+        k = int(np.argmax(np.convolve(gain, np.ones(w), "valid"))) if n > w else 0
         sl = slice(k, k + w)
         fig, ax = plt.subplots(1, 1, figsize=(11, 3.5))
-        ax.plot(t[sl], e[sl] * 1e3, label="measured", lw=0.9)
-        ax.plot(t[sl], traces["e_hat_before"][sl] * 1e3, "--", label="base model", lw=0.9)
-        ax.plot(t[sl], traces["e_hat_after"][sl] * 1e3, ":", label="with diagnosed physics", lw=1.1)
+        ax.plot(tt[sl], rb[sl], label="base model", lw=0.9)
+        ax.plot(tt[sl], ra[sl], label="with the diagnosed physics", lw=0.9)
+        ax.axhline(0, color="k", lw=0.5)
         ax.set_xlabel("time [s]")
-        ax.set_ylabel("tracking error [µm]")
+        ax.set_ylabel("residual e − ê [µm]")
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
-        ax.set_title("where the mismatch is largest: before / after")
+        where = "validation recording" if pre else "identification recording"
+        ax.set_title(f"axis {r.axis}: residual where the added physics helps most ({where}, zoom)")
         out.append(_png(fig))
     return "\n".join(out)
 
