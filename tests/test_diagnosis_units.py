@@ -214,3 +214,54 @@ def test_against_a_simulated_recording_localises_their_difference():
     d = diagnose(x_r, x, Ts, MODEL, against=other, effects=("time_delay",))
     assert d.mismatch["compared_with"] == "simulated recording"
     assert d.mismatch["rms_mm"] == pytest.approx(float(np.sqrt(np.mean((other - x) ** 2))), rel=1e-9)
+
+
+# --- sampled controller, motor-read position term, dead-time profile, summary words ---------
+
+SAMPLED = (0, 0, 0, 0, 1)
+
+
+def test_sampled_controller_follows_the_command_close_to_the_continuous_one(x_r):
+    cont = sim(x_r)
+    samp = sim(x_r, modes=SAMPLED)
+    assert np.all(np.isfinite(samp))
+    # the hold and the backward-difference velocity add about a sample of lag, no more
+    err_c, err_s = x_r - cont, x_r - samp
+    assert 0.0 < np.max(np.abs(samp - cont)) < 0.2 * np.max(np.abs(err_c))
+    assert np.std(err_s) == pytest.approx(np.std(err_c), rel=0.2)
+
+
+def test_two_mass_backlash_position_term_can_read_the_motor(x_r):
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["gap_mm"]] = 0.03
+    ep[EP_INDEX["motor_fraction"]] = 0.8
+    flags = np.array([1, 0, 0, 0, 0, 0])
+    on_table = simulate_augmented(x_r, x_r, Ts, THETA, flags=flags, ep=ep, modes=np.array([1, 0, 0, 0, 0]))
+    ep[EP_INDEX["position_motor_share"]] = 0.8
+    on_motor = simulate_augmented(x_r, x_r, Ts, THETA, flags=flags, ep=ep, modes=np.array([1, 0, 0, 0, 0]))
+    assert np.all(np.isfinite(on_motor))
+    # a loop closed on the motor leaves the table lagging by up to the half gap, not closed
+    assert np.max(np.abs(on_motor - on_table)) > 0.3 * 0.03 / 2
+
+
+def test_delay_profile_recovers_an_actuation_dead_time_on_the_sampled_controller(x_r):
+    from ident.diagnosis.candidates import fit_delay_profile
+
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["delay_s"]] = 0.0013
+    x = simulate_augmented(x_r, x_r, Ts, THETA, flags=np.array([0, 0, 0, 1, 0, 0]), ep=ep,
+                           modes=np.array([0, 1, 0, 0, 1]))
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    start = ModelSpec(THETA.copy())
+    start.modes[4] = 1
+    fitted = fit_delay_profile(start, chunk)
+    assert fitted.modes[1] == 1  # actuation, not capture
+    assert fitted.ep[EP_INDEX["delay_s"]] == pytest.approx(0.0013, rel=0.1)
+
+
+def test_summary_words_show_a_change_that_rounds_away_at_one_decimal():
+    from ident.diagnosis.diagnose import _fit_words, _rms_words
+
+    assert _fit_words(99.801, 99.862) == "99.80 % → 99.86 %"
+    assert _fit_words(91.4, 95.9) == "91.4 % → 95.9 %"
+    assert _rms_words(0.0024, 0.0019) == "residual rms 2.4 → 1.9 µm (−21 %)"

@@ -16,7 +16,10 @@ backlash        dead band of width ``gap_mm`` [0] between motor (x) and table.  
                 position is recorded.  Mode 1 (full-closed loop, as most CNC axes): two
                 masses, motor (share ``motor_fraction`` [11] of the inertia, read by the
                 velocity term) and table (carries the friction, read by the position loop
-                and recorded), coupled by a stiff contact across the gap
+                and recorded), coupled by a stiff contact across the gap.  The position
+                term reads ``(1 − ψ)·x_table + ψ·x_motor``, ψ = position_motor_share [12]
+                (0: PID on the scale; ≈ 0.8: P-PI cascade, whose velocity integral is the
+                motor position); the integral term always reads the table
 stribeck        breakaway friction ``r·d`` at rest falling to Coulomb ``d`` with speed,
                 ``d(v) = d·(1 + (r − 1)·exp(−(v/v_s)²))``; r = static_to_coulomb_ratio [1],
                 v_s = stribeck_velocity_mm_s [2]
@@ -27,8 +30,16 @@ time_delay      dead time ``delay_s`` [6] on the recorded position (mode 0: capt
                 or on the control-equivalent acceleration inside the loop (mode 1)
 cyclic_error    ``c_s·sin(2πx/P) + c_c·cos(2πx/P)``, period_mm P [7], c_s [8], c_c [9]; an error
                 of the recorded position in mm (mode 0) or a disturbance in mm/s² (mode 1)
-saturation      ``u`` clipped to ``±limit`` mm/s² [10], integral frozen while it would wind up
+saturation      ``u`` clipped to ``±limit`` mm/s² [10], integral frozen while it would wind up;
+                with ψ [12] > 0 the position term's motor share is the integral of the
+                motor velocity and freezes with it (P-PI: the velocity integral stops)
 ==============  =========================================================================
+
+Sampled controller (``modes[4] = 1``): ``u`` is computed once per sample from the positions
+read at t_k — velocity by backward difference of the motor position, integral as a
+rectangular sum including the current error — and held over the sample (ZOH), like the
+virtual CNC's digital loop; the plant is still integrated on sub-steps.  Otherwise the loop
+is continuous (eq. 3.3 as written).
 
 Integration: semi-implicit Euler on ``nsub`` sub-steps per sample, ``nsub`` chosen so that
 the fastest pole moves at most 0.15 rad per sub-step (see :func:`substeps`); commanded
@@ -76,8 +87,9 @@ EP_INDEX: dict[str, int] = {
     "amplitude_cos": 9,
     "limit": 10,
     "motor_fraction": 11,
+    "position_motor_share": 12,
 }
-N_EP = 12
+N_EP = 13
 #: Frequency of the motor–table contact of a backlash gap in the two-mass variant, Hz.
 CONTACT_HZ = 400.0
 
@@ -157,6 +169,7 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
     cc = ep[9]
     lim = ep[10]
     mu = ep[11] if ep[11] > 0.0 else 1.0
+    psi = ep[12]
     bl_loop = on_bl and modes[0] == 1
     rs_two = on_rs and modes[3] == 1
     two = bl_loop or rs_two
@@ -190,9 +203,17 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
     qd = 0.0
     ei = 0.0
     tw = 2.0 * math.pi / per
+    sampled = modes[4] != 0
+    xm_prev = 0.0
+    xw = 0.0
+    wind_x = True
+    first = True
+    u_h = 0.0
     for k in range(n):
         if starts[k]:
+            first = True
             xm = x0[k]
+            xw = xm
             xt = xm
             v = 0.0
             vt = 0.0
@@ -216,15 +237,48 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
             xrj = xr[k] + f * (xr[k + 1] - xr[k])
             vrj = vr[k] + f * (vr[k + 1] - vr[k])
             xfb = xt if two else xm
-            u = b0 * ar[k] + b1 * vrj + b2 * xrj + a3 * ei - a2 * xfb - a1 * v
-            wind = True
-            if on_sa:
-                if u > lim:
-                    u = lim
-                    wind = xrj - xfb <= 0.0  # conditional integration (anti-windup)
-                elif u < -lim:
-                    u = -lim
-                    wind = xrj - xfb >= 0.0
+            # two-mass: the position term may read the motor in part (a P-PI cascade's velocity
+            # integral is the motor position), the integral term always reads the table
+            # xw: the motor position as the integral of its velocity, frozen with the integral
+            # while saturated (a P-PI cascade's velocity integral winds no further)
+            xp = (1.0 - psi) * (xt if two else xm) + psi * xw
+            if sampled:
+                # digital controller: u computed at the sample from the positions read then
+                # (velocity by backward difference of the motor position), held over Ts (ZOH)
+                if j == 0:
+                    vfb = (xm - xm_prev) / Ts if not first else 0.0
+                    xm_prev = xm
+                    first = False
+                    ei_new = ei + Ts * (xr[k] - xfb)
+                    u_h = b0 * ar[k] + b1 * vr[k] + b2 * xr[k] + a3 * ei_new - a2 * xp - a1 * vfb
+                    wind_h = True
+                    if on_sa:
+                        # integrand of the loop's integral: e, or a3·e − ψ·a2·ẋ_motor (P-PI)
+                        ig = xr[k] - xfb if psi == 0.0 else a3 * (xr[k] - xfb) - psi * a2 * vfb
+                        if u_h > lim:
+                            u_h = lim
+                            wind_h = ig <= 0.0
+                        elif u_h < -lim:
+                            u_h = -lim
+                            wind_h = ig >= 0.0
+                    if wind_h:
+                        ei = ei_new
+                u = u_h
+                wind = False  # the integral moved once, at the sample
+                wind_x = wind_h
+            else:
+                u = b0 * ar[k] + b1 * vrj + b2 * xrj + a3 * ei - a2 * xp - a1 * v
+                wind = True
+                wind_x = True
+                if on_sa:
+                    ig = xrj - xfb if psi == 0.0 else a3 * (xrj - xfb) - psi * a2 * v
+                    if u > lim:
+                        u = lim
+                        wind = ig <= 0.0  # conditional integration (anti-windup)
+                    elif u < -lim:
+                        u = -lim
+                        wind = ig >= 0.0
+                    wind_x = wind
             if j == 0:
                 out_u[k] = u
             if td_loop:
@@ -285,6 +339,8 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
                 xt += h * vt
                 if wind:
                     ei += h * (xrj - xfb)
+                if wind_x:
+                    xw += h * v
                 continue
             # one mass: friction with a stick phase (eq. 3.2; Stribeck curve when enabled)
             if v > 0.0:
@@ -313,6 +369,8 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
             xm += h * v
             if wind:
                 ei += h * (xrj - xfb)
+            if wind_x:
+                xw += h * v
             if on_bl:
                 if xm - xt > half:
                     xt = xm - half
@@ -372,12 +430,14 @@ def simulate_augmented(
         d0, d1 (mm/s²) of eq. 3.3.
     flags : ndarray of int (6,)
         1 for each effect of :data:`EFFECTS` that is switched on.
-    ep : ndarray (12,)
+    ep : ndarray (13,)
         Effect parameters laid out as :data:`EP_INDEX`.
-    modes : ndarray of int (4,)
+    modes : ndarray of int (5,)
         Variant of backlash (0 semi-closed loop, 1 two-mass full-closed loop), time delay
-        (0 capture, 1 actuation), cyclic error (0 position error, 1 disturbance) and
-        resonance (0 filter on the recorded position, 1 two-mass mode inside the loop).
+        (0 capture, 1 actuation), cyclic error (0 position error, 1 disturbance),
+        resonance (0 filter on the recorded position, 1 two-mass mode inside the loop) and
+        controller (0 continuous, 1 sampled with zero-order hold); shorter arrays are
+        padded with zeros.
     starts : ndarray of bool (N,)
         First sample of each segment (see :func:`segment_starts`); default one segment.
     derivs : (ẋ_r, ẍ_r), optional
@@ -396,9 +456,9 @@ def simulate_augmented(
     th = np.ascontiguousarray(theta, dtype=float)
     fl = np.zeros(6, dtype=np.int64) if flags is None else np.ascontiguousarray(flags, dtype=np.int64)
     e = np.zeros(N_EP) if ep is None else np.ascontiguousarray(ep, dtype=float)
-    md = np.zeros(4, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
-    if md.size < 4:
-        md = np.concatenate([md, np.zeros(4 - md.size, dtype=np.int64)])
+    md = np.zeros(5, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
+    if md.size < 5:
+        md = np.concatenate([md, np.zeros(5 - md.size, dtype=np.int64)])
     if not (np.all(np.isfinite(th)) and np.all(np.isfinite(e))) or e[6] < 0.0 or e[6] > 1.0:
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:

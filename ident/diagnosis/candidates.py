@@ -10,7 +10,11 @@ For each effect of SPEC §7 (see :mod:`ident.diagnosis.augmented`):
    cost over the effect's parameter: the base model identified without the effect has
    adapted to it and must move back before the effect pays);
 3. from the best, the joint output-error fit of base and effect parameters (bounded
-   Levenberg–Marquardt, objective eq. 3.6 on the free-run simulation, weighted per segment).
+   Levenberg–Marquardt, objective eq. 3.6 on the free-run simulation, weighted per segment);
+4. for some effects a second family of starts, the better training fit kept: backlash from
+   a softened base when the given one is stiff (:func:`softened_base`), resonance and dead
+   time on the sampled controller (:func:`sampled_base`; the delay by its profile,
+   :func:`fit_delay_profile`).
 
 Every fit works in scaled coordinates ``z = p / s`` (s = |start| or a floor) so one finite-
 difference step suits parameters as different as a3 ≈ 1e6 1/s³ and b0 ≈ 1.
@@ -18,6 +22,7 @@ difference step suits parameters as different as a3 ≈ 1e6 1/s³ and b0 ≈ 1.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,7 +38,7 @@ from ident.diagnosis.augmented import (
 )
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "start_groups",
-           "fit_effect", "effect_parameters", "PARAM_COUNT"]
+           "fit_effect", "fit_delay_profile", "sampled_base", "softened_base", "effect_parameters", "PARAM_COUNT"]
 
 #: Parameters each effect adds (counted for the acceptance penalty).
 PARAM_COUNT = {
@@ -113,7 +118,7 @@ class ModelSpec:
     theta: np.ndarray
     effects: tuple[str, ...] = ()
     ep: np.ndarray = field(default_factory=lambda: np.zeros(N_EP))
-    modes: np.ndarray = field(default_factory=lambda: np.zeros(4, dtype=np.int64))
+    modes: np.ndarray = field(default_factory=lambda: np.zeros(5, dtype=np.int64))
 
     def flags(self) -> np.ndarray:
         return np.array([1 if e in self.effects else 0 for e in EFFECTS], dtype=np.int64)
@@ -176,6 +181,7 @@ def _bounds(name: str, p0: float, chunk: Chunk) -> tuple[float, float]:
         "amplitude_cos": (-np.inf, np.inf),
         "limit": (1e-3 * amax, 100.0 * amax),
         "motor_fraction": (0.2, 0.98),
+        "position_motor_share": (0.0, 1.0),
     }[name]
 
 
@@ -199,7 +205,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     for p, i in zip(names, idx):
         b = _bounds(p, ep0[i], chunk)
         floor = {"amplitude_sin": 1e-4, "amplitude_cos": 1e-4, "gain": 0.1, "delay_s": 1e-3,
-                 "gap_mm": 1e-3, "stribeck_velocity_mm_s": 0.1}.get(p, 1e-6)
+                 "gap_mm": 1e-3, "stribeck_velocity_mm_s": 0.1,
+                 "position_motor_share": 0.1}.get(p, 1e-6)
         s = max(abs(ep0[i]), floor)
         if p.startswith("amplitude"):
             s = max(abs(ep0[EP_INDEX["amplitude_sin"]]), abs(ep0[EP_INDEX["amplitude_cos"]]), floor)
@@ -337,8 +344,12 @@ def start_groups(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict) -> 
     vmax = float(np.max(np.abs(chunk.derivs[0]))) or 1.0
     groups: list[list[tuple[dict, dict]]] = []
     if effect == "backlash":
+        # mode 1 with the position term on the table (PID-like) or mostly on the motor (P-PI
+        # cascade: the velocity integral is the motor position)
         for g in (0.003, 0.01, 0.03, 0.08):
-            groups.append([({"gap_mm": g, "motor_fraction": 0.8}, {"backlash": mode}) for mode in (0, 1)])
+            groups.append([({"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": 0.0}, {"backlash": 0})]
+                          + [({"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": psi}, {"backlash": 1})
+                             for psi in (0.0, 0.8)])
     elif effect == "stribeck":
         for r in (1.5, 3.0):
             groups.append([({"static_to_coulomb_ratio": r, "stribeck_velocity_mm_s": v}, {})
@@ -349,8 +360,9 @@ def start_groups(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict) -> 
             if all(abs(np.log(f / c)) > 0.2 for c in fs):
                 fs.append(float(f))
         for f in fs:
-            groups.append([({"freq_hz": f, "damping": 0.05, "gain": 1.0, "motor_fraction": 0.8}, {"resonance": 0}),
-                           ({"freq_hz": f, "damping": 0.3, "gain": 1.0, "motor_fraction": 0.8}, {"resonance": 1})])
+            groups.append([({"freq_hz": f, "damping": 0.05, "gain": 1.0, "motor_fraction": 0.8}, {"resonance": 0})]
+                          + [({"freq_hz": f, "damping": 0.3, "gain": 1.0, "motor_fraction": 0.8,
+                               "position_motor_share": psi}, {"resonance": 1}) for psi in (0.0, 0.8)])
     elif effect == "time_delay":
         for d in (0.7, 1.5, 3.0, 6.0):
             groups.append([({"delay_s": d * Ts}, {"time_delay": mode}) for mode in (0, 1)])
@@ -381,23 +393,158 @@ def start_groups(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict) -> 
                            modes=spec.modes, starts=chunk.starts, derivs=chunk.derivs, u_out=u)
         au = np.abs(u[np.isfinite(u)])
         for q in (99.9, 99.0, 96.0):
-            groups.append([({"limit": float(np.percentile(au, q))}, {})])
+            # ψ: the share of the position term that is the (frozen-when-saturated) integral of
+            # the motor velocity — 0 for a PID, ≈ 0.8 for a P-PI cascade
+            groups.append([({"limit": float(np.percentile(au, q)), "position_motor_share": psi}, {})
+                           for psi in (0.0, 0.8)])
     else:
         raise ValueError(f"unknown effect {effect!r}")
     return [[_apply(spec, effect, p, m) for p, m in g] for g in groups]
 
 
 def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, short_iter: int = 3,
-               max_iter: int = 20) -> ModelSpec:
+               max_iter: int = 20, sampled: ModelSpec | None = None) -> ModelSpec:
     """``spec`` plus ``effect``, fitted by output error on ``chunk`` (base parameters too).
 
     Every variant that only differs in the effect's main parameter or variant gets a short
     fit of the base parameters with the effect held there (a profile of the cost over the
     effect's main parameter; phases of a cyclic error are chosen with the base held); the
-    full joint fit continues from the best of those.
+    full joint fit continues from the best of those.  Resonance and dead time are also fitted
+    on the sampled controller, from ``sampled`` (:func:`sampled_base` of ``spec``, computed
+    here when not given), and the better fit on ``chunk`` is returned.
     """
+    if effect in ("resonance", "time_delay") and not spec.modes[4] and sampled is None:
+        sampled = sampled_base(spec, chunk)
+    if effect == "backlash":
+        soft = softened_base(spec, chunk.Ts)
+        if soft is not None:
+            # a stiff base model (one pole faster than the sample rate) has absorbed the lost
+            # motion; the two-mass model's own valley is reached from a moderate bandwidth
+            alt = _fit_effect_from(soft, effect, chunk, evidence, short_iter=8, max_iter=max_iter,
+                                   groups=[[_apply(soft, effect, {"gap_mm": g, "motor_fraction": 0.8,
+                                                                  "position_motor_share": psi}, {"backlash": 1})
+                                            for psi in (0.0, 0.8)] for g in (0.01, 0.03)])
+            own = _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
+            return alt if sse(alt, chunk) < sse(own, chunk) else own
+    if effect == "resonance" and not spec.modes[4]:
+        # a mode near the loop bandwidth interacts with the sample-and-hold phase lag: fit it on
+        # the sampled controller as well, keep whichever fits the training data better
+        alt = _fit_effect_from(sampled, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
+        own = _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
+        return alt if sse(alt, chunk) < sse(own, chunk) else own
+    if effect == "time_delay":
+        # the continuous controller of eq. 3.3 hides the half sample of the zero-order hold and
+        # of the backward-difference velocity in any delay it is given: fit the dead time on
+        # the sampled controller (as well) and keep whichever fits the training data better
+        if spec.modes[4]:
+            return fit_delay_profile(spec, chunk, max_iter=max_iter)
+        alt = fit_delay_profile(sampled, chunk, max_iter=max_iter)
+        own = _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
+        return alt if sse(alt, chunk) < sse(own, chunk) else own
+    return _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
+
+
+def fit_delay_profile(spec: ModelSpec, chunk: Chunk, *, grid_ts: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0, 5.0),
+                      profile_iter: int = 8, golden_steps: int = 5, max_iter: int = 20) -> ModelSpec:
+    """A dead time fitted by its profile: base parameters re-fitted at every trial delay.
+
+    The delay enters the free-run cost through a cliff (a loop given a longer dead time
+    than its gains allow goes unstable), so it is searched, not differentiated: a grid of
+    ``grid_ts`` samples in both variants (capture, actuation) with a short base re-fit at
+    each, then a golden-section search between the best point's neighbours, then the joint
+    fit (eq. 3.6) of base and delay.
+    """
+    Ts = chunk.Ts
+    k = EP_INDEX["delay_s"]
+
+    def profile(start: ModelSpec, d: float) -> tuple[float, ModelSpec | None]:
+        s0 = start.copy()
+        s0.ep[k] = d
+        if not np.isfinite(sse(s0, chunk)):
+            return np.inf, None
+        s1 = fit_spec(s0, chunk, fit_effects=False, max_iter=profile_iter)
+        return sse(s1, chunk), s1
+
+    best_v, best, best_i = np.inf, None, 0
+    grid = [g * Ts for g in grid_ts]
+    for mode in (0, 1):
+        start = _apply(spec, "time_delay", {"delay_s": grid[0]}, {"time_delay": mode})
+        for i, d in enumerate(grid):
+            v, s1 = profile(start, d)
+            if v < best_v:
+                best_v, best, best_i = v, s1, i
+    if best is None:
+        return _apply(spec, "time_delay", {}, {})
+    lo = grid[best_i - 1] if best_i > 0 else 0.0
+    hi = grid[best_i + 1] if best_i + 1 < len(grid) else 2.0 * grid[-1]
+    g = 0.5 * (math.sqrt(5.0) - 1.0)
+    start = best
+    a, b = lo, hi
+    c, d = b - g * (b - a), a + g * (b - a)
+    fc, sc = profile(start, c)
+    fd, sd = profile(start, d)
+    for _ in range(golden_steps):
+        if fc < fd:
+            b, d, fd, sd = d, c, fc, sc
+            c = b - g * (b - a)
+            fc, sc = profile(start, c)
+        else:
+            a, c, fc, sc = c, d, fd, sd
+            d = a + g * (b - a)
+            fd, sd = profile(start, d)
+    for v, s1 in ((fc, sc), (fd, sd)):
+        if s1 is not None and v < best_v:
+            best_v, best = v, s1
+    return fit_spec(best, chunk, max_iter=max_iter)
+
+
+def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30) -> ModelSpec:
+    """``spec`` on the sampled controller (u computed every Ts and held), base re-fitted.
+
+    Started from :func:`softened_base` when the continuous base is stiff (a pole beyond
+    1/Ts would make the sampled loop unstable).
+    """
+    s = softened_base(spec, chunk.Ts) or spec.copy()
+    s.modes[4] = 1
+    # twice, as the base itself: the restart re-scales the parameters after the first long move
+    return fit_spec(fit_spec(s, chunk, fit_effects=False, max_iter=max_iter), chunk, fit_effects=False,
+                    max_iter=max_iter)
+
+
+def softened_base(spec: ModelSpec, Ts: float, pole_ts: float = 0.15, force: bool = False) -> ModelSpec | None:
+    """``spec`` with its two faster closed-loop poles moved to a double pole at −pole_ts/Ts (1/s).
+
+    Unless ``force``, only when the fastest pole of s³ + a1·s² + a2·s + a3 (eq. 3.3) lies
+    beyond 1/Ts — a degenerate, stiff base model; None otherwise.  The slowest pole is
+    kept; b1 scales with a1, b2 and the friction d0, d1 with a2, so feed-forward and static
+    ratios are kept.  The free-run cost of eq. 3.3 has several valleys (an integrator
+    nearly cancelled, a stiff pole absorbing a lost motion …); this is a second start.
+    """
+    th = spec.theta
+    try:
+        r = np.roots([1.0, th[0], th[1], th[2]])
+    except (np.linalg.LinAlgError, ValueError):
+        return None
+    if not np.all(np.isfinite(r)) or th[0] == 0.0 or th[1] == 0.0:
+        return None
+    if not force and np.max(np.abs(r)) <= 1.0 / Ts:
+        return None
+    slow = r[np.argmin(np.abs(r))].real
+    c = np.real(np.poly([slow, -pole_ts / Ts, -pole_ts / Ts]))
+    out = spec.copy()
+    t = out.theta
+    t[4] = th[4] * c[1] / th[0]
+    t[5] = th[5] * c[2] / th[1]
+    t[6:8] = th[6:8] * c[2] / th[1]
+    t[0:3] = c[1:]
+    return out
+
+
+def _fit_effect_from(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, short_iter: int,
+                     max_iter: int, groups: list[list[ModelSpec]] | None = None) -> ModelSpec:
+    """:func:`fit_effect` from the start ``groups`` (default :func:`start_groups`)."""
     best, best_v = None, np.inf
-    for group in start_groups(spec, effect, chunk, evidence):
+    for group in (start_groups(spec, effect, chunk, evidence) if groups is None else groups):
         if effect == "cyclic_error":
             vals = [sse(s, chunk) for s in group]
             group = [group[int(np.argmin(vals))]]
@@ -421,6 +568,7 @@ def effect_parameters(spec: ModelSpec, effect: str) -> dict:
         out = {"gap_mm": float(ep[0]), "loop": "table_fed_back" if spec.modes[0] else "table_recorded"}
         if spec.modes[0]:
             out["motor_fraction"] = float(ep[11])
+            out["position_motor_share"] = float(ep[12])
         return out
     if effect == "stribeck":
         return {"static_to_coulomb_ratio": float(ep[1]), "stribeck_velocity_mm_s": float(ep[2])}
@@ -429,6 +577,12 @@ def effect_parameters(spec: ModelSpec, effect: str) -> dict:
             return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "motor_fraction": float(ep[11]),
                     "kind": "two_mass"}
         return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "gain": float(ep[5]), "kind": "output_filter"}
+    if effect == "resonance" and not spec.modes[4]:
+        # a mode near the loop bandwidth interacts with the sample-and-hold phase lag: fit it on
+        # the sampled controller as well, keep whichever fits the training data better
+        alt = _fit_effect_from(sampled, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
+        own = _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
+        return alt if sse(alt, chunk) < sse(own, chunk) else own
     if effect == "time_delay":
         return {"delay_s": float(ep[6]), "where": "actuation" if spec.modes[1] else "capture"}
     if effect == "cyclic_error":
@@ -442,5 +596,5 @@ def effect_parameters(spec: ModelSpec, effect: str) -> dict:
             "kind": kind,
         }
     if effect == "saturation":
-        return {"limit": float(ep[10]), "limit_unit": "mm/s^2"}
+        return {"limit": float(ep[10]), "limit_unit": "mm/s^2", "position_motor_share": float(ep[12])}
     raise ValueError(f"unknown effect {effect!r}")
