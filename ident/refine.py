@@ -29,7 +29,6 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from agent.errors import InputError
 from ident.metrics import FitResult, fit_result
@@ -307,6 +306,8 @@ def refine(
         if optimizer == "lm":
             message = _projected_lm(residual, q0, lb, ub, max_iter=max_nfev, ftol=ftol, xtol=1e-6)
         elif optimizer == "trf":
+            from scipy.optimize import least_squares  # only for optimizer='trf': 0.3–0.6 s to import
+
             message = least_squares(residual, q0, bounds=(lb, ub), x_scale="jac", diff_step=1e-5,
                                     ftol=ftol, xtol=1e-6, max_nfev=max_nfev, method="trf").message
         else:
