@@ -19,12 +19,8 @@ PRESETS = ("fadal-ppi", "fadal-pid", "fadal-smc")
 
 
 def program_files(seed: int, directory: Path) -> list[Path]:
-    paths = []
-    for tp in identification_programs(axes=("X",), seed=seed):
-        p = directory / f"{tp.name}_{seed}.ngc"
-        p.write_text(dialects.write(tp, "linuxcnc"))
-        paths.append(p)
-    return paths
+    """The default identification set (X axis, LinuxCNC dialect) for ``seed``, written to ``directory``."""
+    return [dialects.save(tp, "linuxcnc", directory) for tp in identification_programs(axes=("X",), seed=seed)]
 
 
 def preset_recording(machine: str, seed: int = 1) -> Recording:

@@ -15,12 +15,9 @@ from gcode_gen.excitation import identification_programs
 
 
 def _programs(tmp: Path, seed: int) -> list[Path]:
-    paths = []
-    for tp in identification_programs(axes=("X",), seed=seed):
-        p = tmp / f"{tp.name}_{seed}.ngc"
-        p.write_text(dialects.write(tp, "linuxcnc"))
-        paths.append(p)
-    return paths
+    directory = tmp / f"seed{seed}"
+    directory.mkdir()
+    return [dialects.save(tp, "linuxcnc", directory) for tp in identification_programs(axes=("X",), seed=seed)]
 
 
 @pytest.fixture(scope="module")

@@ -24,25 +24,11 @@ from drivers.sim.effects import (
 from drivers.sim.presets import load_machine
 from drivers.sim.servo import simulate_axis_response
 
+from _moves import point_to_point
+
 TS = 0.001
 
 
-def point_to_point(targets, a_max=2000.0, v_max=200.0, dwell=0.05, x0=0.0):
-    """Commanded positions [mm] at 1 kHz for exact-stop moves with trapezoidal velocity."""
-    out = [np.full(int(dwell / TS), x0)]
-    x = x0
-    for target in targets:
-        dist = abs(target - x)
-        v = min(v_max, np.sqrt(dist * a_max))
-        ta = v / a_max
-        tc = (dist - v * ta) / v
-        T = 2 * ta + tc
-        t = np.minimum(np.arange(1, int(np.ceil(T / TS)) + 1) * TS, T)
-        p = np.where(t < ta, 0.5 * a_max * t**2,
-                     np.where(t < ta + tc, 0.5 * a_max * ta**2 + v * (t - ta), dist - 0.5 * a_max * (T - t) ** 2))
-        out += [x + np.sign(target - x) * p, np.full(int(dwell / TS), target)]
-        x = target
-    return np.concatenate(out)
 
 
 def axis_of(preset="fadal-ppi", ideal_encoder=False):

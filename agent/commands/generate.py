@@ -85,8 +85,6 @@ def generate(
     try:
         out.mkdir(parents=True, exist_ok=True)
         for tp in programs:
-            path = out / dialects.file_name(tp, dialect)
-            path.write_text(dialects.write(tp, dialect), encoding="utf-8")
-            print(path)
+            print(dialects.save(tp, dialect, out))
     except OSError as exc:
         raise InputError(f"cannot write to {out}: {exc.strerror or exc}") from exc

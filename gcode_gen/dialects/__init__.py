@@ -15,11 +15,13 @@ Every program starts with its header as ``key=value`` comments (``(key=value)`` 
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from agent.errors import InputError
 from gcode_gen.dialects import heidenhain, iso, linuxcnc
 from gcode_gen.program import Toolpath
 
-__all__ = ["DIALECTS", "EXTENSIONS", "write", "file_name"]
+__all__ = ["DIALECTS", "EXTENSIONS", "write", "file_name", "save"]
 
 #: dialect name -> writer function (Toolpath -> text)
 DIALECTS = {"iso": iso.write, "heidenhain": heidenhain.write, "linuxcnc": linuxcnc.write}
@@ -43,3 +45,10 @@ def file_name(toolpath: Toolpath, dialect: str) -> str:
     """File name for ``toolpath`` in ``dialect``, e.g. ``ident_low.ngc``."""
     _check(dialect)
     return toolpath.name + EXTENSIONS[dialect]
+
+
+def save(toolpath: Toolpath, dialect: str, directory: Path | str) -> Path:
+    """Write ``toolpath`` in ``dialect`` to ``directory/<file_name>`` and return the path."""
+    path = Path(directory) / file_name(toolpath, dialect)
+    path.write_text(write(toolpath, dialect), encoding="utf-8")
+    return path
