@@ -12,8 +12,10 @@
    two-fold cross-validation over the halves of every segment — against the base model
    re-fitted by the same procedure, so re-fitting alone earns nothing;
 4. **accepts** an effect only when it removes at least ``MIN_GAIN + PER_PARAM·k`` of the
-   held-out residual norm (k = parameters it adds) *and* improves every fold; greedy
-   forward selection then tries a second effect on top of the first;
+   held-out residual norm (k = parameters it adds), improves every fold and passes its
+   signature test (:func:`_plausible`); the accepted effect with the largest reduction wins
+   (a resonance corroborated by a residual spectrum peak counts ``CORROBORATED_BONUS``×);
+   greedy forward selection then tries a second effect on top of the first;
 5. **tells** the user: ``Diagnosis.summary``.
 """
 
@@ -57,6 +59,17 @@ NOISE_FACTOR = 3.0
 LONG_S = 10.0
 #: A second effect must remove at least this share on top of the first.
 MIN_GAIN_SECOND = 0.10
+#: A fitted backlash gap below this (mm) is lost motion at the scale of the mismatch eq. 3.3
+#: leaves against a digital loop anyway (~0.4 µm rms, SPEC §7 effects add ~1–3 µm): rejected.
+MIN_GAP_MM = 0.003
+#: A resonance is corroborated when a peak of the residual spectrum (the first
+#: ``PEAKS_CHECKED``) lies within this log-distance (≈ ±20 %) of its fitted frequency …
+PEAK_LOG_TOL = 0.2
+PEAKS_CHECKED = 4
+#: … and a corroborated resonance ranks as if it removed this many times its held-out share
+#: (a mode near the loop bandwidth and a dead time both add phase lag; the spectrum peak
+#: tells them apart).
+CORROBORATED_BONUS = 1.25
 _BASE_KEYS = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
 
 
@@ -313,12 +326,14 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
     """
     for spec in sc.specs:
         p = effect_parameters(spec, eff)
-        if eff == "backlash" and p["gap_mm"] < 1e-3:
-            return False, "gap below 1 µm"
+        if eff == "backlash" and p["gap_mm"] < MIN_GAP_MM:
+            return False, f"gap below {1e3 * MIN_GAP_MM:.0f} µm"
         if eff == "stribeck" and p["static_to_coulomb_ratio"] < 1.2:
             return False, "breakaway within 20 % of Coulomb friction"
         if eff == "resonance" and (p["damping"] > 0.15 or p["freq_hz"] > 0.45 / Ts):
             return False, f"not a lightly damped mode (ζ = {p['damping']:.2f}, {p['freq_hz']:.0f} Hz)"
+        if eff == "resonance" and not _peak_near(loc, p["freq_hz"]):
+            return False, f"no residual spectrum peak near {p['freq_hz']:.0f} Hz"
         # the continuous loop of eq. 3.3 turns the digital loop's own sample of lag (hold and
         # backward-difference velocity) into a delay; the sampled controller already has it
         if eff == "time_delay" and p["delay_s"] < (0.5 * Ts if spec.modes[4] else Ts):
@@ -333,6 +348,14 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
                 if peak < 0.05 or peak < 4.0 * med:
                     return False, f"residual not periodic at {p['period_mm']:.3g} mm"
     return True, ""
+
+
+def _peak_near(loc: dict, freq_hz: float) -> bool:
+    """True when one of the first ``PEAKS_CHECKED`` residual spectrum peaks lies near ``freq_hz`` (Hz)."""
+    if not (math.isfinite(freq_hz) and freq_hz > 0):
+        return False
+    peaks = loc.get("spectrum_peaks", [])[:PEAKS_CHECKED]
+    return any(pk["freq_hz"] > 0 and abs(math.log(pk["freq_hz"] / freq_hz)) < PEAK_LOG_TOL for pk in peaks)
 
 
 def _signatures(loc: dict) -> dict[str, dict]:
@@ -566,8 +589,10 @@ def diagnose(
             if not above_noise:
                 plaus, why = False, f"held-out residual {1e3 * base_rms:.3f} µm is at the noise floor"
             ok = gain >= need and folds_ok and plaus
-            if ok and gain > best_gain:
-                best_name, best_gain = eff, gain
+            # a resonance that passed the signature test has a spectrum peak at its frequency
+            rank = gain * (CORROBORATED_BONUS if eff == "resonance" else 1.0)
+            if ok and rank > best_gain:
+                best_name, best_gain = eff, rank
             candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, need, folds_ok, sigs, [],
                                          why, base_sc.raw_rms))
         # 4. greedy forward selection: the best single effect, then a second on top of it
