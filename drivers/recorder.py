@@ -111,7 +111,6 @@ class McapRecorder:
         )
         self._seq += 1
         self.count += 1
-        self._last_t_ns = log_ns
         self.maybe_flush()
 
     def event(self, kind: str, counter: int = 0, count: int = 0, message: str = "") -> None:

@@ -59,7 +59,8 @@ def run_programs(
     fx = [parse_effect(e) for e in effects]
     Ts = mach.Ts
     start = {a: 0.0 for a in mach.axes}
-    parts: list[dict[str, np.ndarray]] = []
+    parts: list[dict[str, np.ndarray]] = []  # per program: axis -> commanded (mm)
+    segments: list[np.ndarray] = []
     info = []
     moved: set[str] = set()
     for index, p in enumerate(programs):
@@ -82,13 +83,13 @@ def run_programs(
             x = np.asarray(traj.axes.get(a, np.full(traj.t.shape, start[a])), dtype=float)
             part[a] = np.concatenate([x, np.full(n_settle, x[-1] if x.size else start[a])])
             start[a] = float(part[a][-1])
-        part["__segment__"] = np.full(traj.t.shape[0] + n_settle, index, dtype=np.int32)
+        segments.append(np.full(traj.t.shape[0] + n_settle, index, dtype=np.int32))
         parts.append(part)
     if not moved:
         raise InputError("the programs move no axis")
     axes = [a for a in mach.axes if a in moved]
     commanded = {a: np.concatenate([part[a] for part in parts]) for a in axes}
-    segment = np.concatenate([part["__segment__"] for part in parts])
+    segment = np.concatenate(segments)
     actual = simulate_machine(commanded, mach, fx, seed=seed)
     n = segment.size
     return Recording(
