@@ -195,7 +195,7 @@ def test_sync_1_makes_the_capture_the_sync_producer():
 
     th = threading.Thread(target=drives, daemon=True)
     th.start()
-    drv = open_driver(f"can://virtual/{chan}?nodes=1,2&sync=1&period=0.02&sdo=0")
+    drv = open_driver(f"can://virtual/{chan}?nodes=1,2&sync=1&period=0.05&sdo=0")
     info = drv.open()
     out = []
     t0 = time.monotonic()
@@ -207,10 +207,10 @@ def test_sync_1_makes_the_capture_the_sync_producer():
     drive.shutdown()
     assert info.extra["sync_producer"] == "capture"
     assert seen_ids == {0x80}  # the only frame the capture sent
-    assert len(out) >= 30 and info.sample_period == 0.02
+    assert len(out) >= 30 and info.sample_period == 0.05
     counters = [s.counter for s in out]
     # TPDOs carry no counter: a drive must answer before the next SYNC (a real one answers within
-    # microseconds; this Python thread gets a 20 ms period to be sure to).
+    # microseconds; this Python thread gets a 50 ms period to be sure to, even on a loaded machine).
     assert counters == list(range(counters[0], counters[0] + len(out)))
     for s in out:
         c = s.counter % 240 + 1
