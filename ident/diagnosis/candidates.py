@@ -12,8 +12,8 @@ For each effect of SPEC §7 (see :mod:`ident.diagnosis.augmented`):
 3. from the best, the joint output-error fit of base and effect parameters (bounded
    Levenberg–Marquardt, objective eq. 3.6 on the free-run simulation, weighted per segment);
 4. for some effects a second family of starts, the better training fit kept: backlash from
-   a softened base when the given one is stiff (:func:`softened_base`), resonance and dead
-   time on the sampled controller (:func:`sampled_base`; the delay by its profile,
+   a softened base when the given one is stiff (:func:`softened_base`), backlash, resonance
+   and dead time on the sampled controller (:func:`sampled_base`; the delay by its profile,
    :func:`fit_delay_profile`).
 
 Every fit works in scaled coordinates ``z = p / s`` (s = |start| or a floor) so one finite-
@@ -58,6 +58,8 @@ _FREE = {
     "saturation": ["limit"],
 }
 _MODE_SLOT = {"backlash": 0, "time_delay": 1, "cyclic_error": 2, "resonance": 3}
+#: Starting gaps of the backlash fit, mm (one profile start each, in every variant).
+BACKLASH_GAPS_MM = (0.003, 0.01, 0.02, 0.04, 0.08)
 
 
 @dataclass
@@ -320,6 +322,23 @@ def _levenberg_marquardt(resid, z0: np.ndarray, lb: np.ndarray, ub: np.ndarray, 
     return z, cost
 
 
+def _backlash_start(spec: ModelSpec, params: dict, modes: dict) -> ModelSpec:
+    """``spec`` plus a backlash gap, its friction given back what the gap explains.
+
+    With the motor leading the table by half the gap in steady motion, a position term that
+    reads the motor in part (share ψ) sees an offset ``a2·ψ·g/2`` against the direction of
+    motion: a base model fitted without the gap has taken it as Coulomb friction (on a P-PI
+    drive often more than the friction itself).  Started without this correction the gap
+    pays only after a long walk of d0, d1, and the fit stops at a smaller gap.
+    """
+    s = _apply(spec, "backlash", params, modes)
+    if modes.get("backlash") == 1:
+        shift = s.theta[1] * params.get("position_motor_share", 0.0) * 0.5 * params["gap_mm"]
+        s.theta[6] -= shift
+        s.theta[7] += shift
+    return s
+
+
 def _apply(spec: ModelSpec, effect: str, params: dict, modes: dict) -> ModelSpec:
     s = spec.copy()
     s.effects = tuple(dict.fromkeys(spec.effects + (effect,)))
@@ -345,11 +364,13 @@ def start_groups(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict) -> 
     groups: list[list[tuple[dict, dict]]] = []
     if effect == "backlash":
         # mode 1 with the position term on the table (PID-like) or mostly on the motor (P-PI
-        # cascade: the velocity integral is the motor position)
-        for g in (0.003, 0.01, 0.03, 0.08):
-            groups.append([({"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": 0.0}, {"backlash": 0})]
-                          + [({"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": psi}, {"backlash": 1})
-                             for psi in (0.0, 0.8)])
+        # cascade: the velocity integral is the motor position).  Mode 0 (loop closed on the
+        # motor, the table recorded) is not started: a controller records the position it
+        # controls, and a dead band on the output alone mimics stick-slip at reversals
+        for g in BACKLASH_GAPS_MM:
+            groups.append([({"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": psi}, {"backlash": 1})
+                           for psi in (0.0, 0.8)])
+        return [[_backlash_start(spec, p, m) for p, m in g] for g in groups]
     elif effect == "stribeck":
         for r in (1.5, 3.0):
             groups.append([({"static_to_coulomb_ratio": r, "stribeck_velocity_mm_s": v}, {})
@@ -409,23 +430,27 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
     Every variant that only differs in the effect's main parameter or variant gets a short
     fit of the base parameters with the effect held there (a profile of the cost over the
     effect's main parameter; phases of a cyclic error are chosen with the base held); the
-    full joint fit continues from the best of those.  Resonance and dead time are also fitted
-    on the sampled controller, from ``sampled`` (:func:`sampled_base` of ``spec``, computed
+    full joint fit continues from the best of those.  Backlash, resonance and dead time are
+    also fitted on the sampled controller, from ``sampled`` (:func:`sampled_base` of ``spec``, computed
     here when not given), and the better fit on ``chunk`` is returned.
     """
-    if effect in ("resonance", "time_delay") and not spec.modes[4] and sampled is None:
+    if effect in ("resonance", "time_delay", "backlash") and not spec.modes[4] and sampled is None:
         sampled = sampled_base(spec, chunk)
     if effect == "backlash":
+        fits = [_fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)]
         soft = softened_base(spec, chunk.Ts)
         if soft is not None:
             # a stiff base model (one pole faster than the sample rate) has absorbed the lost
             # motion; the two-mass model's own valley is reached from a moderate bandwidth
-            alt = _fit_effect_from(soft, effect, chunk, evidence, short_iter=8, max_iter=max_iter,
-                                   groups=[[_apply(soft, effect, {"gap_mm": g, "motor_fraction": 0.8,
-                                                                  "position_motor_share": psi}, {"backlash": 1})
-                                            for psi in (0.0, 0.8)] for g in (0.01, 0.03)])
-            own = _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
-            return alt if sse(alt, chunk) < sse(own, chunk) else own
+            fits.append(_fit_effect_from(soft, effect, chunk, evidence, short_iter=8, max_iter=max_iter,
+                                         groups=[[_backlash_start(soft, {"gap_mm": g, "motor_fraction": 0.8,
+                                                                         "position_motor_share": psi}, {"backlash": 1})
+                                                  for psi in (0.0, 0.8)] for g in (0.01, 0.03)]))
+        if not spec.modes[4]:
+            # the gap inside a digital loop: the lost motion meets the sample-and-hold lag
+            fits.append(_fit_effect_from(sampled, effect, chunk, evidence, short_iter=short_iter,
+                                         max_iter=max_iter))
+        return min(fits, key=lambda f: sse(f, chunk))
     if effect == "resonance" and not spec.modes[4]:
         # a mode near the loop bandwidth interacts with the sample-and-hold phase lag: fit it on
         # the sampled controller as well, keep whichever fits the training data better
@@ -577,12 +602,6 @@ def effect_parameters(spec: ModelSpec, effect: str) -> dict:
             return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "motor_fraction": float(ep[11]),
                     "kind": "two_mass"}
         return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "gain": float(ep[5]), "kind": "output_filter"}
-    if effect == "resonance" and not spec.modes[4]:
-        # a mode near the loop bandwidth interacts with the sample-and-hold phase lag: fit it on
-        # the sampled controller as well, keep whichever fits the training data better
-        alt = _fit_effect_from(sampled, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
-        own = _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
-        return alt if sse(alt, chunk) < sse(own, chunk) else own
     if effect == "time_delay":
         return {"delay_s": float(ep[6]), "where": "actuation" if spec.modes[1] else "capture"}
     if effect == "cyclic_error":

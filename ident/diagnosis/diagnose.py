@@ -332,8 +332,13 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
             return False, "breakaway within 20 % of Coulomb friction"
         if eff == "resonance" and (p["damping"] > 0.15 or p["freq_hz"] > 0.45 / Ts):
             return False, f"not a lightly damped mode (ζ = {p['damping']:.2f}, {p['freq_hz']:.0f} Hz)"
-        if eff == "resonance" and not _peak_near(loc, p["freq_hz"]):
-            return False, f"no residual spectrum peak near {p['freq_hz']:.0f} Hz"
+        if eff == "resonance":
+            # a two-mass mode inside the loop shows between its locked-motor frequency
+            # f·√μ (motor held by a stiff velocity loop) and its free-free frequency f
+            lo = p["freq_hz"] * math.sqrt(p["motor_fraction"]) if p["kind"] == "two_mass" else p["freq_hz"]
+            if not _peak_near(loc, lo, p["freq_hz"]):
+                band = f"{lo:.0f}–{p['freq_hz']:.0f} Hz" if lo < p["freq_hz"] else f"{p['freq_hz']:.0f} Hz"
+                return False, f"no residual spectrum peak near {band}"
         # the continuous loop of eq. 3.3 turns the digital loop's own sample of lag (hold and
         # backward-difference velocity) into a delay; the sampled controller already has it
         if eff == "time_delay" and p["delay_s"] < (0.5 * Ts if spec.modes[4] else Ts):
@@ -350,12 +355,15 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
     return True, ""
 
 
-def _peak_near(loc: dict, freq_hz: float) -> bool:
-    """True when one of the first ``PEAKS_CHECKED`` residual spectrum peaks lies near ``freq_hz`` (Hz)."""
-    if not (math.isfinite(freq_hz) and freq_hz > 0):
+def _peak_near(loc: dict, lo_hz: float, hi_hz: float | None = None) -> bool:
+    """True when one of the first ``PEAKS_CHECKED`` residual spectrum peaks lies near ``lo_hz``
+    (or in the band ``lo_hz`` … ``hi_hz``), within the tolerance ``PEAK_LOG_TOL`` either side."""
+    hi_hz = lo_hz if hi_hz is None else hi_hz
+    if not (math.isfinite(lo_hz) and math.isfinite(hi_hz) and 0 < lo_hz <= hi_hz):
         return False
     peaks = loc.get("spectrum_peaks", [])[:PEAKS_CHECKED]
-    return any(pk["freq_hz"] > 0 and abs(math.log(pk["freq_hz"] / freq_hz)) < PEAK_LOG_TOL for pk in peaks)
+    return any(pk["freq_hz"] > 0 and math.log(lo_hz) - PEAK_LOG_TOL < math.log(pk["freq_hz"]) < math.log(hi_hz)
+               + PEAK_LOG_TOL for pk in peaks)
 
 
 def _signatures(loc: dict) -> dict[str, dict]:
