@@ -245,7 +245,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=10_000)
     ap.add_argument("--classes", default="", help="comma-separated classes to run (default: all seven)")
     ap.add_argument("--jobs", type=int, default=1, help="cases diagnosed in parallel (processes)")
-    ap.add_argument("--cache", type=Path, default=None, help="folder keeping prepared cases between runs")
+    ap.add_argument("--cache", type=Path, default=None, help="folder keeping prepared cases between runs (keyed by seed, class and index only: empty it when the way cases are drawn or concealed changes)")
     args = ap.parse_args(argv)
     classes = [c.strip() for c in args.classes.split(",") if c.strip()] or None
     for c in classes or []:
