@@ -265,3 +265,47 @@ def test_summary_words_show_a_change_that_rounds_away_at_one_decimal():
     assert _fit_words(99.801, 99.862) == "99.80 % → 99.86 %"
     assert _fit_words(91.4, 95.9) == "91.4 % → 95.9 %"
     assert _rms_words(0.0024, 0.0019) == "residual rms 2.4 → 1.9 µm (−21 %)"
+
+
+def _two_mass_recording(x_r: np.ndarray, freq_hz: float) -> np.ndarray:
+    """P-PI drive with a lightly damped two-mass mode, sampled controller (position term on the motor)."""
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["freq_hz"]] = freq_hz
+    ep[EP_INDEX["damping"]] = 0.02
+    ep[EP_INDEX["motor_fraction"]] = 0.8
+    ep[EP_INDEX["position_motor_share"]] = 0.8
+    return simulate_augmented(x_r, x_r, Ts, THETA, flags=np.array([0, 0, 1, 0, 0, 0]), ep=ep,
+                              modes=np.array([0, 0, 0, 1, 1]))
+
+
+def test_a_mode_started_at_the_residual_spectrum_peak_is_found_there(x_r):
+    from ident.diagnosis.candidates import fit_resonance_at_peaks, resonance_at_peak
+
+    x = _two_mass_recording(x_r, 120.0)
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    base = ModelSpec(THETA.copy())
+    base.modes[4] = 1
+    # the closed-loop peak of a two-mass mode lies a little below its free-free frequency
+    evidence = {"spectrum_peaks": [{"freq_hz": 4.0, "share_above_20_hz": 0.0},
+                                   {"freq_hz": 110.0, "share_above_20_hz": 0.3}]}
+    fitted = fit_resonance_at_peaks(base, chunk, evidence)
+    assert fitted is not None
+    assert fitted.ep[EP_INDEX["freq_hz"]] == pytest.approx(120.0, rel=0.05)
+    assert sse(fitted, chunk) < 0.01 * sse(base, chunk)
+    assert resonance_at_peak(fitted, evidence["spectrum_peaks"], Ts)
+    # a peak holding little of the high-frequency residual power is no reason to look for a mode
+    weak = {"spectrum_peaks": [{"freq_hz": 110.0, "share_above_20_hz": 0.05}]}
+    assert fit_resonance_at_peaks(base, chunk, weak) is None
+
+
+def test_a_damped_or_unseen_mode_is_not_taken_for_a_resonance():
+    from ident.diagnosis.candidates import resonance_at_peak
+
+    peaks = [{"freq_hz": 100.0, "share_above_20_hz": 0.3}]
+    spec = ModelSpec(THETA.copy(), ("resonance",))
+    spec.modes[3] = 1
+    spec.ep[EP_INDEX["motor_fraction"]] = 0.8
+    for f, zeta, seen in ((105.0, 0.02, True), (105.0, 0.4, False), (300.0, 0.02, False)):
+        spec.ep[EP_INDEX["freq_hz"]] = f
+        spec.ep[EP_INDEX["damping"]] = zeta
+        assert resonance_at_peak(spec, peaks, Ts) is seen

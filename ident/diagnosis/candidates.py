@@ -36,9 +36,11 @@ from ident.diagnosis.augmented import (
     simulate_augmented,
     substeps,
 )
+from ident.diagnosis.residuals import peak_in_band
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "start_groups",
-           "fit_effect", "fit_delay_profile", "sampled_base", "softened_base", "effect_parameters", "PARAM_COUNT"]
+           "fit_effect", "fit_delay_profile", "sampled_base", "softened_base", "effect_parameters", "PARAM_COUNT",
+           "fit_resonance_at_peaks", "resonance_at_peak"]
 
 #: Parameters each effect adds (counted for the acceptance penalty).
 PARAM_COUNT = {
@@ -58,6 +60,9 @@ _FREE = {
     "saturation": ["limit"],
 }
 _MODE_SLOT = {"backlash": 0, "time_delay": 1, "cyclic_error": 2, "resonance": 3}
+#: Recordings longer than this (s) get the shorter searches, to keep the diagnosis within its
+#: time budget: one hold-out fold and one second effect (diagnose), short delay profiles (here).
+LONG_S = 10.0
 #: Starting gaps of the backlash fit, mm (one profile start each, in every variant).
 BACKLASH_GAPS_MM = (0.003, 0.01, 0.02, 0.04, 0.08)
 
@@ -188,11 +193,12 @@ def _bounds(name: str, p0: float, chunk: Chunk) -> tuple[float, float]:
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
-             max_iter: int = 25) -> ModelSpec:
+             max_iter: int = 25, bounds: dict[str, tuple[float, float]] | None = None) -> ModelSpec:
     """Output-error fit (eq. 3.6 on the free-run simulation) of base and effect parameters.
 
     Starts from ``spec``; base parameters move jointly with the effects' parameters when
-    ``fit_base``.  Returns the fitted copy; a fit that fails to improve returns ``spec``.
+    ``fit_base``; ``bounds`` narrows the box of named effect parameters.  Returns the fitted
+    copy; a fit that fails to improve returns ``spec``.
     """
     names = [p for e in spec.effects for p in _FREE[e]] if fit_effects else []
     idx = [EP_INDEX[p] for p in names]
@@ -206,6 +212,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     lo, hi = [], []
     for p, i in zip(names, idx):
         b = _bounds(p, ep0[i], chunk)
+        if bounds and p in bounds:
+            b = (max(b[0], bounds[p][0]), min(b[1], bounds[p][1]))
         floor = {"amplitude_sin": 1e-4, "amplitude_cos": 1e-4, "gain": 0.1, "delay_s": 1e-3,
                  "gap_mm": 1e-3, "stribeck_velocity_mm_s": 0.1,
                  "position_motor_share": 0.1}.get(p, 1e-6)
@@ -454,9 +462,15 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
     if effect == "resonance" and not spec.modes[4]:
         # a mode near the loop bandwidth interacts with the sample-and-hold phase lag: fit it on
         # the sampled controller as well, keep whichever fits the training data better
-        alt = _fit_effect_from(sampled, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
-        own = _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
-        return alt if sse(alt, chunk) < sse(own, chunk) else own
+        fits = [_fit_effect_from(sampled, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter),
+                _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)]
+        at_peaks = fit_resonance_at_peaks(sampled, chunk, evidence, max_iter=max_iter)
+        if at_peaks is not None:
+            # free, the fit tends to buy training cost with a stiff, well-damped "mode" the
+            # residual spectrum does not show; a mode where the spectrum peaks is preferred
+            peaks = evidence.get("spectrum_peaks", [])
+            fits = [at_peaks] + [f for f in fits if resonance_at_peak(f, peaks, chunk.Ts)]
+        return min(fits, key=lambda f: sse(f, chunk))
     if effect == "time_delay":
         # the continuous controller of eq. 3.3 hides the half sample of the zero-order hold and
         # of the backward-difference velocity in any delay it is given: fit the dead time on
@@ -469,17 +483,77 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
     return _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
 
 
-def fit_delay_profile(spec: ModelSpec, chunk: Chunk, *, grid_ts: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 3.0, 5.0),
-                      profile_iter: int = 8, golden_steps: int = 5, max_iter: int = 20) -> ModelSpec:
+#: Resonance starts at the residual spectrum peaks above 20 Hz that hold at least this share
+#: of the residual power above 20 Hz (a mode concentrates it: ≥ 20 % in the benchmark; a dead
+#: time spreads it over small peaks: ≤ 11 %) …
+PEAK_MIN_SHARE = 0.15
+#: … the first this many of them, each held inside this band (× the peak frequency): a
+#: two-mass mode shows between f·√μ and f, so its free-free frequency lies above the peak
+PEAK_STARTS = 2
+PEAK_BAND = (0.9, 1.4)
+#: Damping of a mode the signature test accepts (ζ above it is a filter, not a resonance).
+MAX_MODE_DAMPING = 0.15
+
+
+def resonance_at_peak(spec: ModelSpec, peaks: list[dict], Ts: float, tol: float = 0.2) -> bool:
+    """Does the fitted resonance of ``spec`` look like a mode the residual spectrum shows?
+
+    Lightly damped (ζ ≤ ``MAX_MODE_DAMPING``), below 0.45/Ts, and a spectrum peak in its band
+    f·√μ … f (two-mass: between locked-motor and free-free frequency; f alone for the filter).
+    """
+    p = effect_parameters(spec, "resonance")
+    f = p["freq_hz"]
+    if p["damping"] > MAX_MODE_DAMPING or f > 0.45 / Ts:
+        return False
+    lo = f * math.sqrt(p["motor_fraction"]) if p["kind"] == "two_mass" else f
+    return peak_in_band(peaks, lo, f, tol)
+
+
+def fit_resonance_at_peaks(sampled: ModelSpec, chunk: Chunk, evidence: dict, *, max_iter: int = 20,
+                           profile_iter: int = 5) -> ModelSpec | None:
+    """A two-mass mode (sampled controller) started at each residual spectrum peak and kept near it.
+
+    Started lightly damped (ζ = 0.02) at the peak, the position term on the table (PID) or
+    mostly on the motor (P-PI); a short base re-fit with the mode held, then the joint
+    output-error fit with the frequency held inside ``PEAK_BAND`` × the peak and ζ ≤
+    ``MAX_MODE_DAMPING``.  Every start is fitted jointly: the profile cost alone ranks them
+    badly (a mode near the loop bandwidth only pays once the gains have moved back).
+    None when the spectrum has no such peak (``PEAK_MIN_SHARE``).
+    """
+    peaks = [p["freq_hz"] for p in evidence.get("spectrum_peaks", []) if p.get("share_above_20_hz", 0.0) >= PEAK_MIN_SHARE]
+    base_v = sse(sampled, chunk)
+    best, best_v = None, np.inf
+    for fp in peaks[:PEAK_STARTS]:
+        bounds = {"freq_hz": (PEAK_BAND[0] * fp, PEAK_BAND[1] * fp), "damping": (0.002, MAX_MODE_DAMPING)}
+        for psi in (0.0, 0.8):
+            s0 = _apply(sampled, "resonance", {"freq_hz": fp, "damping": 0.02, "gain": 1.0, "motor_fraction": 0.8,
+                                               "position_motor_share": psi}, {"resonance": 1})
+            if not sse(s0, chunk) < 1e3 * base_v:  # a start the loop cannot hold (diverges)
+                continue
+            s1 = fit_spec(s0, chunk, fit_effects=False, max_iter=profile_iter)
+            s2 = fit_spec(s1, chunk, max_iter=max_iter, bounds=bounds)
+            v = sse(s2, chunk)
+            if v < best_v:
+                best, best_v = s2, v
+    return best
+
+
+def fit_delay_profile(spec: ModelSpec, chunk: Chunk, *,
+                      grid_ts: tuple[float, ...] = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0),
+                      profile_iter: int | None = None, golden_steps: int = 5, max_iter: int = 20) -> ModelSpec:
     """A dead time fitted by its profile: base parameters re-fitted at every trial delay.
 
     The delay enters the free-run cost through a cliff (a loop given a longer dead time
     than its gains allow goes unstable), so it is searched, not differentiated: a grid of
     ``grid_ts`` samples in both variants (capture, actuation) with a short base re-fit at
     each, then a golden-section search between the best point's neighbours, then the joint
-    fit (eq. 3.6) of base and delay.
+    fit (eq. 3.6) of base and delay.  The base re-fit gets ``profile_iter`` iterations
+    (default 25, 8 on recordings longer than ``LONG_S``): a delay trades against the gains,
+    and a short re-fit leaves the profile's minimum up to a sample off.
     """
     Ts = chunk.Ts
+    if profile_iter is None:
+        profile_iter = 8 if chunk.n * Ts > LONG_S else 25
     k = EP_INDEX["delay_s"]
 
     def profile(start: ModelSpec, d: float) -> tuple[float, ModelSpec | None]:

@@ -32,6 +32,8 @@ import numpy as np
 from agent.errors import InputError
 from ident.diagnosis.augmented import EFFECTS, segment_starts
 from ident.diagnosis.candidates import (
+    LONG_S,
+    MAX_MODE_DAMPING,
     PARAM_COUNT,
     Chunk,
     ModelSpec,
@@ -45,7 +47,7 @@ from ident.diagnosis.candidates import (
     softened_base,
     sse,
 )
-from ident.diagnosis.residuals import localise
+from ident.diagnosis.residuals import localise, peak_in_band
 
 __all__ = ["Candidate", "Diagnosis", "diagnose", "MIN_GAIN", "PER_PARAM"]
 
@@ -55,8 +57,6 @@ MIN_GAIN = 0.04
 PER_PARAM = 0.01
 #: The held-out residual rms of the base model must exceed this many times the noise floor.
 NOISE_FACTOR = 3.0
-#: Recordings longer than this (s) are scored on one hold-out fold instead of two.
-LONG_S = 10.0
 #: A second effect must remove at least this share on top of the first.
 MIN_GAIN_SECOND = 0.10
 #: A fitted backlash gap below this (mm) is lost motion at the scale of the mismatch eq. 3.3
@@ -330,7 +330,7 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
             return False, f"gap below {1e3 * MIN_GAP_MM:.0f} µm"
         if eff == "stribeck" and p["static_to_coulomb_ratio"] < 1.2:
             return False, "breakaway within 20 % of Coulomb friction"
-        if eff == "resonance" and (p["damping"] > 0.15 or p["freq_hz"] > 0.45 / Ts):
+        if eff == "resonance" and (p["damping"] > MAX_MODE_DAMPING or p["freq_hz"] > 0.45 / Ts):
             return False, f"not a lightly damped mode (ζ = {p['damping']:.2f}, {p['freq_hz']:.0f} Hz)"
         if eff == "resonance":
             # a two-mass mode inside the loop shows between its locked-motor frequency
@@ -358,12 +358,7 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
 def _peak_near(loc: dict, lo_hz: float, hi_hz: float | None = None) -> bool:
     """True when one of the first ``PEAKS_CHECKED`` residual spectrum peaks lies near ``lo_hz``
     (or in the band ``lo_hz`` … ``hi_hz``), within the tolerance ``PEAK_LOG_TOL`` either side."""
-    hi_hz = lo_hz if hi_hz is None else hi_hz
-    if not (math.isfinite(lo_hz) and math.isfinite(hi_hz) and 0 < lo_hz <= hi_hz):
-        return False
-    peaks = loc.get("spectrum_peaks", [])[:PEAKS_CHECKED]
-    return any(pk["freq_hz"] > 0 and math.log(lo_hz) - PEAK_LOG_TOL < math.log(pk["freq_hz"]) < math.log(hi_hz)
-               + PEAK_LOG_TOL for pk in peaks)
+    return peak_in_band(loc.get("spectrum_peaks", [])[:PEAKS_CHECKED], lo_hz, hi_hz, PEAK_LOG_TOL)
 
 
 def _signatures(loc: dict) -> dict[str, dict]:

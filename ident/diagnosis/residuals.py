@@ -27,6 +27,7 @@ __all__ = [
     "worst_windows",
     "position_periodogram",
     "spectrum_peaks",
+    "peak_in_band",
     "whiteness",
     "localise",
 ]
@@ -147,15 +148,19 @@ def position_periodogram(
     return share, amp
 
 
-def spectrum_peaks(r: np.ndarray, Ts: float, count: int = 3, f_min: float = 2.0) -> tuple[list[dict], np.ndarray, np.ndarray]:
+def spectrum_peaks(r: np.ndarray, Ts: float, count: int = 3, f_min: float = 2.0,
+                   f_high: float = 20.0) -> tuple[list[dict], np.ndarray, np.ndarray]:
     """Welch spectrum of r and its ``count`` strongest local peaks above ``f_min`` Hz.
 
-    Each peak: frequency (Hz), share of residual power in ±10 % around it, and its
-    prominence over the spectrum's median (ratio).
+    Each peak: frequency (Hz), share of residual power in ±10 % around it, the same power
+    as a share of the power above ``f_high`` Hz (a structural mode concentrates there, where
+    the slow tracking-error residual does not mask it), and its prominence over the
+    spectrum's median (ratio).
     """
     nper = int(min(r.size, max(256, 2 ** int(np.log2(max(r.size // 8, 256))))))
     f, P = signal.welch(r - r.mean(), fs=1.0 / Ts, nperseg=nper)
     tot = float(np.sum(P)) or 1.0
+    tot_high = float(np.sum(P[f > f_high])) or 1.0
     med = float(np.median(P[f >= f_min])) if np.any(f >= f_min) else 1.0
     peaks, _ = signal.find_peaks(P)
     peaks = [p for p in peaks if f[p] >= f_min]
@@ -167,10 +172,21 @@ def spectrum_peaks(r: np.ndarray, Ts: float, count: int = 3, f_min: float = 2.0)
             {
                 "freq_hz": float(f[p]),
                 "power_share": float(np.sum(P[band]) / tot),
+                "share_above_20_hz": float(np.sum(P[band]) / tot_high) if f[p] > f_high else 0.0,
                 "prominence": float(P[p] / med) if med > 0 else float("inf"),
             }
         )
     return rows, f, P
+
+
+def peak_in_band(peaks: list[dict], lo_hz: float, hi_hz: float | None = None, tol: float = 0.2) -> bool:
+    """True when one of ``peaks`` (:func:`spectrum_peaks`) lies in ``lo_hz`` … ``hi_hz``
+    (``lo_hz`` alone when ``hi_hz`` is None), widened by ``tol`` in log-frequency either side."""
+    hi_hz = lo_hz if hi_hz is None else hi_hz
+    if not (np.isfinite(lo_hz) and np.isfinite(hi_hz) and 0 < lo_hz <= hi_hz):
+        return False
+    return any(pk["freq_hz"] > 0 and np.log(lo_hz) - tol < np.log(pk["freq_hz"]) < np.log(hi_hz) + tol
+               for pk in peaks)
 
 
 def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
