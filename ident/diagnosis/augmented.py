@@ -44,6 +44,10 @@ is continuous (eq. 3.3 as written).
 Integration: semi-implicit Euler on ``nsub`` sub-steps per sample, ``nsub`` chosen so that
 the fastest pole moves at most 0.15 rad per sub-step (see :func:`substeps`); commanded
 position and velocity are interpolated linearly inside a sample, acceleration is held.
+Velocities live at half sub-steps in this scheme, so on the sampled controller the first
+sub-step of a sample, which straddles the switch of the held ``u``, gets the mean of the
+old and new value: without it the model leads the digital loop by half a sub-step (0.25 ms
+at nsub = 2 on a PID drive), and a fitted dead time would take that up.
 Every contiguous segment restarts at rest at the recorded actual position.
 """
 
@@ -209,9 +213,12 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
     wind_x = True
     first = True
     u_h = 0.0
+    u_last = 0.0
+    fresh = True
     for k in range(n):
         if starts[k]:
             first = True
+            fresh = True
             xm = x0[k]
             xw = xm
             xt = xm
@@ -263,7 +270,15 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
                             wind_h = ig >= 0.0
                     if wind_h:
                         ei = ei_new
-                u = u_h
+                    # semi-implicit Euler keeps velocities at half sub-steps: the first
+                    # sub-step spans the switch of the held u, so it gets the mean of the old
+                    # and new value (else the model leads the loop by h/2 — 0.25 ms at nsub 2,
+                    # which a fitted dead time would take up)
+                    u = u_h if fresh else 0.5 * (u_last + u_h)
+                    u_last = u_h
+                    fresh = False
+                else:
+                    u = u_h
                 wind = False  # the integral moved once, at the sample
                 wind_x = wind_h
             else:

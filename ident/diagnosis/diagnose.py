@@ -241,7 +241,10 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold
     """The reference model (effects ``keep`` only) with the lowest training cost per fold.
 
     Candidates for the reference: the given one (``scs[0]``) and a re-fit of it started
-    from every other scored spec's parameters with the extra effects removed.
+    from every other scored spec's parameters with the extra effects removed.  A re-fit
+    that wins on training cost but predicts a fold's held-out data worse than the given
+    one is not taken for that fold (a reference that is poor on held-out data would credit
+    any effect with the difference).
     """
     ref = scs[0]
     pool = per_fold.pool  # type: ignore[attr-defined]
@@ -259,6 +262,11 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold
         v = sse(s1, folds[i][0])
         if v < best_v[i]:
             best[i], best_v[i] = s1, v
+    # the given reference's held-out cost per fold, as the ceiling of a replacement
+    given = ref.fold_sse()
+    for i, s1 in enumerate(best):
+        if s1 is not ref.specs[i] and not sse(s1, folds[i][1]) <= given[i]:
+            best[i] = ref.specs[i]
     return scored(best)
 
 
