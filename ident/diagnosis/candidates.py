@@ -40,7 +40,7 @@ from ident.diagnosis.residuals import peak_in_band
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "start_groups",
            "fit_effect", "fit_delay_profile", "sampled_base", "softened_base", "effect_parameters", "PARAM_COUNT",
-           "fit_resonance_at_peaks", "resonance_at_peak"]
+           "fit_resonance_at_peaks", "resonance_at_peak", "delayed_regression_start"]
 
 #: Parameters each effect adds (counted for the acceptance penalty).
 PARAM_COUNT = {
@@ -594,7 +594,55 @@ def fit_delay_profile(spec: ModelSpec, chunk: Chunk, *,
     for v, s1 in ((fc, sc), (fd, sd)):
         if s1 is not None and v < best_v:
             best_v, best = v, s1
-    return fit_spec(best, chunk, max_iter=max_iter)
+    fits = [fit_spec(best, chunk, max_iter=max_iter)]
+    if spec.modes[4] and chunk.n * Ts <= LONG_S:
+        # the valley of a dead time inside the loop can lie far from the base identified
+        # without it (gains 2-3x lower): start there from the regression that knows the delay
+        # (the hold and the sampled velocity add about a sample: m samples in the regression
+        # is a dead time of about m − 1 samples on the sampled controller)
+        for m in (1, 2, 3):
+            s0 = delayed_regression_start(chunk, m)
+            if s0 is None:
+                continue
+            s0 = _apply(s0, "time_delay", {"delay_s": max(m - 1, 0.5) * Ts}, {"time_delay": 1})
+            s0.modes[4] = 1
+            if np.isfinite(sse(s0, chunk)):
+                s1 = fit_spec(s0, chunk, fit_effects=False, max_iter=25)
+                fits.append(fit_spec(fit_spec(s1, chunk, max_iter=max_iter), chunk, max_iter=max_iter))
+    return min(fits, key=lambda f: sse(f, chunk))
+
+
+def delayed_regression_start(chunk: Chunk, m: int) -> ModelSpec | None:
+    """Base parameters of eq. 3.3 from the regression of eq. 3.11 with an actuation delay of m samples.
+
+    With ``u(t − τ) = ẍ(t) + d(ẋ(t))`` (τ = m·Ts) the rows of eq. 3.11 at sample k pair
+    e_i, ẋ, x_r, ẋ_r, ẍ_r at k with ẍ and the friction direction at k + m; solved
+    unconstrained (:func:`ident.regression.lstsq_scaled`), θ of eq. 3.10 scaled back by
+    a2 = 1/α_2.  None when the regression cannot be built or gives α_2 ≤ 0.
+    """
+    from agent.errors import RapidIdentError
+    from ident.regression import build_regression, lstsq_scaled
+
+    seg = np.cumsum(chunk.starts) - 1
+    try:
+        reg = build_regression(chunk.x_r, chunk.x, chunk.Ts, seg, shift=0, standstill="hold")
+    except RapidIdentError:  # too few samples, no motion: no start, the profile stands alone
+        return None
+    Phi, idx = reg.Phi, reg.index
+    row_of = np.full(chunk.n + m + 1, -1)
+    row_of[idx] = np.arange(idx.size)
+    later = row_of[idx + m]
+    ok = later >= 0
+    if np.count_nonzero(ok) < 50:
+        return None
+    P = Phi[ok].copy()
+    P[:, [2, 6, 7]] = Phi[later[ok]][:, [2, 6, 7]]  # −ẍ, −PV, −NV at k + m
+    th, _cost = lstsq_scaled(P, reg.Y[ok])
+    alpha_i, alpha_1, alpha_2, beta_0, beta_1, beta_2, d_plus, d_minus = th
+    if not alpha_2 > 0:
+        return None
+    a2 = 1.0 / alpha_2
+    return ModelSpec(np.array([alpha_1, 1.0, alpha_i, beta_2, beta_1, beta_0, d_plus, d_minus]) * a2)
 
 
 def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30) -> ModelSpec:
