@@ -240,11 +240,9 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
     first = True
     u_h = 0.0
     u_last = 0.0
-    fresh = True
     for k in range(n):
         if starts[k]:
             first = True
-            fresh = True
             xm = x0[k]
             xw = xm
             xt = xm
@@ -281,7 +279,6 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
                 if j == 0:
                     vfb = (xm - xm_prev) / Ts if not first else 0.0
                     xm_prev = xm
-                    first = False
                     ei_new = ei + Ts * (xr[k] - xfb)
                     u_h = b0 * ar[k] + b1 * vr[k] + b2 * xr[k] + a3 * ei_new - a2 * xp - a1 * vfb
                     wind_h = True
@@ -300,9 +297,9 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
                     # sub-step spans the switch of the held u, so it gets the mean of the old
                     # and new value (else the model leads the loop by h/2 — 0.25 ms at nsub 2,
                     # which a fitted dead time would take up)
-                    u = u_h if fresh else 0.5 * (u_last + u_h)
+                    u = u_h if first else 0.5 * (u_last + u_h)
                     u_last = u_h
-                    fresh = False
+                    first = False
                 else:
                     u = u_h
                 wind = False  # the integral moved once, at the sample

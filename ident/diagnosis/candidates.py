@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -38,9 +39,13 @@ from ident.diagnosis.augmented import (
 )
 from ident.diagnosis.residuals import peak_in_band
 
+if TYPE_CHECKING:
+    from ident.regression import Regression
+
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "start_groups",
            "fit_effect", "fit_delay_profile", "sampled_base", "softened_base", "effect_parameters", "PARAM_COUNT",
-           "fit_resonance_at_peaks", "resonance_at_peak", "delayed_regression_start"]
+           "fit_resonance_at_peaks", "resonance_at_peak", "resonance_signature", "chunk_regression",
+           "delayed_regression_start"]
 
 #: Parameters each effect adds (counted for the acceptance penalty).
 PARAM_COUNT = {
@@ -495,18 +500,29 @@ PEAK_BAND = (0.9, 1.4)
 MAX_MODE_DAMPING = 0.15
 
 
-def resonance_at_peak(spec: ModelSpec, peaks: list[dict], Ts: float, tol: float = 0.2) -> bool:
-    """Does the fitted resonance of ``spec`` look like a mode the residual spectrum shows?
+def resonance_signature(spec: ModelSpec, peaks: list[dict], Ts: float, tol: float = 0.2) -> str:
+    """Why the fitted resonance of ``spec`` does not look like a mode the residual spectrum shows ("" if it does).
 
-    Lightly damped (ζ ≤ ``MAX_MODE_DAMPING``), below 0.45/Ts, and a spectrum peak in its band
-    f·√μ … f (two-mass: between locked-motor and free-free frequency; f alone for the filter).
+    A mode is lightly damped (ζ ≤ ``MAX_MODE_DAMPING``), below 0.45/Ts, and one of ``peaks``
+    lies in its band f·√μ … f widened by ``tol`` in log-frequency: a two-mass mode inside the
+    loop shows between its locked-motor frequency f·√μ (motor held by a stiff velocity loop)
+    and its free-free frequency f; the filter on the recorded position at f alone.
     """
     p = effect_parameters(spec, "resonance")
     f = p["freq_hz"]
     if p["damping"] > MAX_MODE_DAMPING or f > 0.45 / Ts:
-        return False
+        return f"not a lightly damped mode (ζ = {p['damping']:.2f}, {f:.0f} Hz)"
     lo = f * math.sqrt(p["motor_fraction"]) if p["kind"] == "two_mass" else f
-    return peak_in_band(peaks, lo, f, tol)
+    if not peak_in_band(peaks, lo, f, tol):
+        band = f"{lo:.0f}–{f:.0f} Hz" if lo < f else f"{f:.0f} Hz"
+        return f"no residual spectrum peak near {band}"
+    return ""
+
+
+def resonance_at_peak(spec: ModelSpec, peaks: list[dict], Ts: float, tol: float = 0.2) -> bool:
+    """Does the fitted resonance of ``spec`` look like a mode the residual spectrum shows?
+    (:func:`resonance_signature` finds nothing to object)."""
+    return not resonance_signature(spec, peaks, Ts, tol)
 
 
 def fit_resonance_at_peaks(sampled: ModelSpec, chunk: Chunk, evidence: dict, *, max_iter: int = 20,
@@ -520,7 +536,8 @@ def fit_resonance_at_peaks(sampled: ModelSpec, chunk: Chunk, evidence: dict, *, 
     badly (a mode near the loop bandwidth only pays once the gains have moved back).
     None when the spectrum has no such peak (``PEAK_MIN_SHARE``).
     """
-    peaks = [p["freq_hz"] for p in evidence.get("spectrum_peaks", []) if p.get("share_above_20_hz", 0.0) >= PEAK_MIN_SHARE]
+    peaks = [p["freq_hz"] for p in evidence.get("spectrum_peaks", [])
+             if p.get("share_above_20_hz", 0.0) >= PEAK_MIN_SHARE]
     base_v = sse(sampled, chunk)
     best, best_v = None, np.inf
     for fp in peaks[:PEAK_STARTS]:
@@ -600,8 +617,9 @@ def fit_delay_profile(spec: ModelSpec, chunk: Chunk, *,
         # without it (gains 2-3x lower): start there from the regression that knows the delay
         # (the hold and the sampled velocity add about a sample: m samples in the regression
         # is a dead time of about m − 1 samples on the sampled controller)
-        for m in (1, 2, 3):
-            s0 = delayed_regression_start(chunk, m)
+        reg = chunk_regression(chunk)
+        for m in (1, 2, 3) if reg is not None else ():
+            s0 = delayed_regression_start(chunk, m, reg)
             if s0 is None:
                 continue
             s0 = _apply(s0, "time_delay", {"delay_s": max(m - 1, 0.5) * Ts}, {"time_delay": 1})
@@ -612,22 +630,36 @@ def fit_delay_profile(spec: ModelSpec, chunk: Chunk, *,
     return min(fits, key=lambda f: sse(f, chunk))
 
 
-def delayed_regression_start(chunk: Chunk, m: int) -> ModelSpec | None:
+def chunk_regression(chunk: Chunk) -> Regression | None:
+    """The regression of eq. 3.11 on ``chunk`` (no command shift, standstill rows kept), or None.
+
+    None when it cannot be built (too few samples, no motion): no regression start then.
+    """
+    from agent.errors import RapidIdentError
+    from ident.regression import build_regression
+
+    seg = np.cumsum(chunk.starts) - 1
+    try:
+        return build_regression(chunk.x_r, chunk.x, chunk.Ts, seg, shift=0, standstill="hold")
+    except RapidIdentError:
+        return None
+
+
+def delayed_regression_start(chunk: Chunk, m: int, reg: Regression | None = None) -> ModelSpec | None:
     """Base parameters of eq. 3.3 from the regression of eq. 3.11 with an actuation delay of m samples.
 
     With ``u(t − τ) = ẍ(t) + d(ẋ(t))`` (τ = m·Ts) the rows of eq. 3.11 at sample k pair
     e_i, ẋ, x_r, ẋ_r, ẍ_r at k with ẍ and the friction direction at k + m; solved
     unconstrained (:func:`ident.regression.lstsq_scaled`), θ of eq. 3.10 scaled back by
-    a2 = 1/α_2.  None when the regression cannot be built or gives α_2 ≤ 0.
+    a2 = 1/α_2.  ``reg``: :func:`chunk_regression` of ``chunk``, built here when not given
+    (build it once for several m).  None when the regression cannot be built or gives α_2 ≤ 0.
     """
-    from agent.errors import RapidIdentError
-    from ident.regression import build_regression, lstsq_scaled
+    from ident.regression import lstsq_scaled
 
-    seg = np.cumsum(chunk.starts) - 1
-    try:
-        reg = build_regression(chunk.x_r, chunk.x, chunk.Ts, seg, shift=0, standstill="hold")
-    except RapidIdentError:  # too few samples, no motion: no start, the profile stands alone
-        return None
+    if reg is None:
+        reg = chunk_regression(chunk)
+        if reg is None:
+            return None
     Phi, idx = reg.Phi, reg.index
     row_of = np.full(chunk.n + m + 1, -1)
     row_of[idx] = np.arange(idx.size)

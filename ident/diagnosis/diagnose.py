@@ -33,7 +33,6 @@ from agent.errors import InputError
 from ident.diagnosis.augmented import EFFECTS, segment_starts
 from ident.diagnosis.candidates import (
     LONG_S,
-    MAX_MODE_DAMPING,
     PARAM_COUNT,
     Chunk,
     ModelSpec,
@@ -42,12 +41,13 @@ from ident.diagnosis.candidates import (
     fit_spec,
     make_chunk,
     residual,
+    resonance_signature,
     sampled_base,
     simulate_spec,
     softened_base,
     sse,
 )
-from ident.diagnosis.residuals import localise, peak_in_band
+from ident.diagnosis.residuals import localise
 
 __all__ = ["Candidate", "Diagnosis", "diagnose", "MIN_GAIN", "PER_PARAM"]
 
@@ -338,15 +338,10 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
             return False, f"gap below {1e3 * MIN_GAP_MM:.0f} µm"
         if eff == "stribeck" and p["static_to_coulomb_ratio"] < 1.2:
             return False, "breakaway within 20 % of Coulomb friction"
-        if eff == "resonance" and (p["damping"] > MAX_MODE_DAMPING or p["freq_hz"] > 0.45 / Ts):
-            return False, f"not a lightly damped mode (ζ = {p['damping']:.2f}, {p['freq_hz']:.0f} Hz)"
         if eff == "resonance":
-            # a two-mass mode inside the loop shows between its locked-motor frequency
-            # f·√μ (motor held by a stiff velocity loop) and its free-free frequency f
-            lo = p["freq_hz"] * math.sqrt(p["motor_fraction"]) if p["kind"] == "two_mass" else p["freq_hz"]
-            if not _peak_near(loc, lo, p["freq_hz"]):
-                band = f"{lo:.0f}–{p['freq_hz']:.0f} Hz" if lo < p["freq_hz"] else f"{p['freq_hz']:.0f} Hz"
-                return False, f"no residual spectrum peak near {band}"
+            why = resonance_signature(spec, loc.get("spectrum_peaks", [])[:PEAKS_CHECKED], Ts, PEAK_LOG_TOL)
+            if why:
+                return False, why
         # the continuous loop of eq. 3.3 turns the digital loop's own sample of lag (hold and
         # backward-difference velocity) into a delay; the sampled controller already has it
         if eff == "time_delay" and p["delay_s"] < (0.5 * Ts if spec.modes[4] else Ts):
@@ -361,12 +356,6 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
                 if peak < 0.05 or peak < 4.0 * med:
                     return False, f"residual not periodic at {p['period_mm']:.3g} mm"
     return True, ""
-
-
-def _peak_near(loc: dict, lo_hz: float, hi_hz: float | None = None) -> bool:
-    """True when one of the first ``PEAKS_CHECKED`` residual spectrum peaks lies near ``lo_hz``
-    (or in the band ``lo_hz`` … ``hi_hz``), within the tolerance ``PEAK_LOG_TOL`` either side."""
-    return peak_in_band(loc.get("spectrum_peaks", [])[:PEAKS_CHECKED], lo_hz, hi_hz, PEAK_LOG_TOL)
 
 
 def _signatures(loc: dict) -> dict[str, dict]:

@@ -148,19 +148,22 @@ def position_periodogram(
     return share, amp
 
 
-def spectrum_peaks(r: np.ndarray, Ts: float, count: int = 3, f_min: float = 2.0,
-                   f_high: float = 20.0) -> tuple[list[dict], np.ndarray, np.ndarray]:
+#: Lower edge of the band a peak's ``share_above_20_hz`` is taken in, Hz.
+HIGH_BAND_HZ = 20.0
+
+
+def spectrum_peaks(r: np.ndarray, Ts: float, count: int = 3, f_min: float = 2.0) -> tuple[list[dict], np.ndarray, np.ndarray]:
     """Welch spectrum of r and its ``count`` strongest local peaks above ``f_min`` Hz.
 
     Each peak: frequency (Hz), share of residual power in ±10 % around it, the same power
-    as a share of the power above ``f_high`` Hz (a structural mode concentrates there, where
+    as a share of the power above ``HIGH_BAND_HZ`` (a structural mode concentrates there, where
     the slow tracking-error residual does not mask it), and its prominence over the
     spectrum's median (ratio).
     """
     nper = int(min(r.size, max(256, 2 ** int(np.log2(max(r.size // 8, 256))))))
     f, P = signal.welch(r - r.mean(), fs=1.0 / Ts, nperseg=nper)
     tot = float(np.sum(P)) or 1.0
-    tot_high = float(np.sum(P[f > f_high])) or 1.0
+    tot_high = float(np.sum(P[f > HIGH_BAND_HZ])) or 1.0
     med = float(np.median(P[f >= f_min])) if np.any(f >= f_min) else 1.0
     peaks, _ = signal.find_peaks(P)
     peaks = [p for p in peaks if f[p] >= f_min]
@@ -172,7 +175,7 @@ def spectrum_peaks(r: np.ndarray, Ts: float, count: int = 3, f_min: float = 2.0,
             {
                 "freq_hz": float(f[p]),
                 "power_share": float(np.sum(P[band]) / tot),
-                "share_above_20_hz": float(np.sum(P[band]) / tot_high) if f[p] > f_high else 0.0,
+                "share_above_20_hz": float(np.sum(P[band]) / tot_high) if f[p] > HIGH_BAND_HZ else 0.0,
                 "prominence": float(P[p] / med) if med > 0 else float("inf"),
             }
         )
