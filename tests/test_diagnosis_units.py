@@ -328,3 +328,28 @@ def test_regression_with_the_delay_starts_near_the_true_gains(x_r):
     # the regression without the delay puts the loop's gains far off (a2 > 2x)
     far = delayed_regression_start(chunk, 0)
     assert far.theta[1] > 2.0 * THETA[1]
+
+
+# PID drive with velocity feed-forward (the fadal-pid preset's loop), eq. 3.3 parameters
+THETA_PID = np.array([192.65, 44356.0, 316830.0, 0.0, 190.1, 44356.0, 441.0, -302.0])
+
+
+@pytest.mark.parametrize("start_gap_mm", [0.03, 0.09])
+def test_a_backlash_gap_started_off_by_half_moves_to_the_true_gap(x_r, start_gap_mm):
+    # the cost over the gap is a parabola with a ripple from contact instants on sub-step
+    # boundaries; read with too fine a difference, the gap stays where it was started
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["gap_mm"]] = 0.06
+    ep[EP_INDEX["motor_fraction"]] = 0.75
+    modes = np.array([1, 0, 0, 0, 1])  # two-mass backlash, sampled controller
+    x = simulate_augmented(x_r, x_r, Ts, THETA_PID, flags=np.array([1, 0, 0, 0, 0, 0]), ep=ep, modes=modes)
+    x = x + np.random.default_rng(0).normal(0.0, 5e-5, x.size)
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    start = ModelSpec(THETA_PID.copy())
+    start.effects = ("backlash",)
+    start.ep[EP_INDEX["gap_mm"]] = start_gap_mm
+    start.ep[EP_INDEX["motor_fraction"]] = 0.75
+    start.modes[:] = modes
+    fitted = fit_spec(start, chunk)
+    assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.06, rel=0.05)
+    assert sse(fitted, chunk) < 0.01 * sse(start, chunk)
