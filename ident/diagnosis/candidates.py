@@ -506,6 +506,10 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
         alt = fit_delay_profile(sampled, chunk, max_iter=max_iter)
         own = _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
         return alt if sse(alt, chunk) < sse(own, chunk) else own
+    if effect == "stribeck":
+        # stick and breakaway land on sub-step boundaries as contacts do: fine and coarse step
+        return min((_fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter,
+                                     fd_step=h) for h in (FD_STEP, FD_STEP_ROUGH)), key=lambda f: sse(f, chunk))
     return _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
 
 
