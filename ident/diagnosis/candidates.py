@@ -14,7 +14,9 @@ For each effect of SPEC §7 (see :mod:`ident.diagnosis.augmented`):
 4. for some effects a second family of starts, the better training fit kept: backlash from
    a softened base when the given one is stiff (:func:`softened_base`), backlash, resonance
    and dead time on the sampled controller (:func:`sampled_base`; the delay by its profile,
-   :func:`fit_delay_profile`).
+   :func:`fit_delay_profile`); backlash on the sampled controller and Stribeck friction
+   also with a coarse difference step (:data:`FD_STEP_ROUGH`), their costs being rough on
+   the scale of the fine one.
 
 Every fit works in scaled coordinates ``z = p / s`` (s = |start| or a floor) so one finite-
 difference step suits parameters as different as a3 ≈ 1e6 1/s³ and b0 ≈ 1.
@@ -464,7 +466,9 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
     effect's main parameter; phases of a cyclic error are chosen with the base held); the
     full joint fit continues from the best of those.  Backlash, resonance and dead time are
     also fitted on the sampled controller, from ``sampled`` (:func:`sampled_base` of ``spec``, computed
-    here when not given), and the better fit on ``chunk`` is returned.
+    here when not given), and the better fit on ``chunk`` is returned.  Backlash on the
+    sampled controller and Stribeck friction are fitted with the fine and the coarse
+    difference step (:data:`FD_STEP`, :data:`FD_STEP_ROUGH`), the better training fit kept.
     """
     if effect in ("resonance", "time_delay", "backlash") and not spec.modes[4] and sampled is None:
         sampled = sampled_base(spec, chunk)
