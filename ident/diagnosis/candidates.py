@@ -253,7 +253,10 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     if z0.size == 0:
         return spec.copy()
     z0 = np.minimum(np.maximum(z0, lb), ub)
-    steps = np.concatenate([np.full(nb, fd_step), [_FD_STEPS.get(p, fd_step) for p in names]])
+
+    def steps(h: float) -> np.ndarray:  # difference step per scaled parameter
+        return np.concatenate([np.full(nb, h), [_FD_STEPS.get(p, h) for p in names]])
+
     nsub = _nsub(spec, chunk.Ts)
     m = chunk.score
     w = chunk.w[m]
@@ -278,10 +281,9 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         return r
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
-        z, cost0 = _levenberg_marquardt(resid, z0, lb, ub, max_iter=max_iter, step=steps)
-        if fd_step > FD_STEP:
-            fine = np.concatenate([np.full(nb, FD_STEP), [_FD_STEPS.get(p, FD_STEP) for p in names]])
-            z, cost0 = _levenberg_marquardt(resid, z, lb, ub, max_iter=max(max_iter // 2, 1), step=fine)
+        z, cost0 = _levenberg_marquardt(resid, z0, lb, ub, max_iter=max_iter, step=steps(fd_step))
+        if fd_step > FD_STEP:  # polish: the coarse step stops short of the valley's floor
+            z, cost0 = _levenberg_marquardt(resid, z, lb, ub, max_iter=max(max_iter // 2, 1), step=steps(FD_STEP))
     if not np.isfinite(cost0):
         return spec.copy()
     th, ep = unpack(z)
@@ -485,7 +487,9 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
         # the gap inside a digital loop: the lost motion meets the sample-and-hold lag.  Fitted
         # with the coarse difference step as well: a loose PID loop rattles at every contact
         # and only the coarse step reaches its valley (a 99.8 % P-PI fit needs the fine one)
-        for s0, h in ([(spec, FD_STEP_ROUGH)] if spec.modes[4] else [(sampled, FD_STEP), (sampled, FD_STEP_ROUGH)]):
+        # (a base already on the sampled controller had its fine-step fit above)
+        on_sampled = [(spec, FD_STEP_ROUGH)] if spec.modes[4] else [(sampled, FD_STEP), (sampled, FD_STEP_ROUGH)]
+        for s0, h in on_sampled:
             fits.append(_fit_effect_from(s0, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter,
                                          fd_step=h))
         return min(fits, key=lambda f: sse(f, chunk))
