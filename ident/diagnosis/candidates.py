@@ -531,13 +531,16 @@ PEAK_STARTS = 2
 PEAK_BAND = (0.9, 1.4)
 #: Damping of a mode the signature test accepts (ζ above it is a filter, not a resonance).
 MAX_MODE_DAMPING = 0.15
+#: A spectrum peak corroborates a mode within this log-distance (≈ ±20 %) of its band — for
+#: the fit's choice among resonance fits and for the acceptance test alike.
+PEAK_LOG_TOL = 0.2
 #: A start whose free-run cost exceeds the base model's by this factor has diverged (costs
 #: of 1e10 and beyond); a lightly damped mode started at the peak with the base gains rings
 #: at up to ~1e3 × and still fits (two P-PI modes near 90 Hz: 1007 × and 1372 ×).
 DIVERGED = 1e6
 
 
-def resonance_signature(spec: ModelSpec, peaks: list[dict], Ts: float, tol: float = 0.2) -> str:
+def resonance_signature(spec: ModelSpec, peaks: list[dict], Ts: float, tol: float = PEAK_LOG_TOL) -> str:
     """Why the fitted resonance of ``spec`` does not look like a mode the residual spectrum shows ("" if it does).
 
     A mode is lightly damped (ζ ≤ ``MAX_MODE_DAMPING``), below 0.45/Ts, and one of ``peaks``
@@ -556,7 +559,7 @@ def resonance_signature(spec: ModelSpec, peaks: list[dict], Ts: float, tol: floa
     return ""
 
 
-def resonance_at_peak(spec: ModelSpec, peaks: list[dict], Ts: float, tol: float = 0.2) -> bool:
+def resonance_at_peak(spec: ModelSpec, peaks: list[dict], Ts: float, tol: float = PEAK_LOG_TOL) -> bool:
     """Does the fitted resonance of ``spec`` look like a mode the residual spectrum shows?
     (:func:`resonance_signature` finds nothing to object)."""
     return not resonance_signature(spec, peaks, Ts, tol)

@@ -62,9 +62,8 @@ MIN_GAIN_SECOND = 0.10
 #: A fitted backlash gap below this (mm) is lost motion at the scale of the mismatch eq. 3.3
 #: leaves against a digital loop anyway (~0.4 µm rms, SPEC §7 effects add ~1–3 µm): rejected.
 MIN_GAP_MM = 0.003
-#: A resonance is corroborated when a peak of the residual spectrum (the first
-#: ``PEAKS_CHECKED``) lies within this log-distance (≈ ±20 %) of its fitted frequency …
-PEAK_LOG_TOL = 0.2
+#: A resonance is corroborated when one of the first ``PEAKS_CHECKED`` peaks of the residual
+#: spectrum lies in its band (``candidates.resonance_signature``, within ``PEAK_LOG_TOL``) …
 PEAKS_CHECKED = 4
 #: … and a corroborated resonance ranks as if it removed this many times its held-out share
 #: (a mode near the loop bandwidth and a dead time both add phase lag; the spectrum peak
@@ -339,7 +338,7 @@ def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str
         if eff == "stribeck" and p["static_to_coulomb_ratio"] < 1.2:
             return False, "breakaway within 20 % of Coulomb friction"
         if eff == "resonance":
-            why = resonance_signature(spec, loc.get("spectrum_peaks", [])[:PEAKS_CHECKED], Ts, PEAK_LOG_TOL)
+            why = resonance_signature(spec, loc.get("spectrum_peaks", [])[:PEAKS_CHECKED], Ts)
             if why:
                 return False, why
         # the continuous loop of eq. 3.3 turns the digital loop's own sample of lag (hold and
