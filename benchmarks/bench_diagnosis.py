@@ -160,7 +160,14 @@ def run_case(cls: str, i: int, seed0: int, use_cv: bool, cache: Path | None) -> 
     named = [c for c in d.candidates if c.accepted and c.effect == verdict[0]]
     said = ""
     if named:
-        said = " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in named[0].parameters.items()
+        def words(v) -> str:
+            if isinstance(v, float):
+                return f"{v:.4g}"
+            if isinstance(v, list):
+                return "[" + ",".join(words(w) for w in v) + "]"
+            return str(v)
+
+        said = " ".join(f"{k}={words(v)}" for k, v in named[0].parameters.items()
                         if k not in ("amplitude_unit", "limit_unit"))
     ok = "ok " if verdict[0] == cls else "MISS"
     err_txt = " ".join(f"{k}{100 * e:+.0f}%" for k, e in errs.items())

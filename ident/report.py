@@ -179,6 +179,15 @@ def _g(v: float) -> str:
     return "n/a" if v is None or not math.isfinite(v) else f"{v:.6g}"
 
 
+def _param_text(v) -> str:
+    """A candidate parameter: a number, a range of numbers ("lo–hi") or a word."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return _g(v)
+    if isinstance(v, (list, tuple)) and v and all(isinstance(w, (int, float)) for w in v):
+        return "–".join(dict.fromkeys(_g(w) for w in v))  # a range of one value prints once
+    return str(v)
+
+
 def _axis_section(r: AxisResult) -> str:
     m = r.model
     parts = [f"<h2>Axis {html.escape(r.axis)}</h2>"]
@@ -210,7 +219,7 @@ def _axis_section(r: AxisResult) -> str:
         dd = d.to_dict()
         cand_rows = []
         for c in dd.get("candidates", []):
-            params = ", ".join(f"{k} = {_g(v) if isinstance(v, (int, float)) else v}" for k, v in c.get("parameters", {}).items())
+            params = ", ".join(f"{k} = {_param_text(v)}" for k, v in c.get("parameters", {}).items())
             cand_rows.append(
                 f"<tr><td>{html.escape(str(c.get('effect')))}</td><td>{html.escape(params)}</td>"
                 f"<td>{_g(c.get('fit_before_pct'))}</td><td>{_g(c.get('fit_after_pct'))}</td>"

@@ -264,6 +264,56 @@ def test_delay_profile_recovers_an_actuation_dead_time_on_the_sampled_controller
     assert fitted.ep[EP_INDEX["delay_s"]] == pytest.approx(0.0013, rel=0.1)
 
 
+def _capture_delay_recording(x_r: np.ndarray, delay_s: float):
+    """A chunk from the P-PI drive on the sampled controller, recorded late by a dead time,
+    read by a 1 µm scale (the quantisation is what leaves the delay weakly determined)."""
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["delay_s"]] = delay_s
+    x = simulate_augmented(x_r, x_r, Ts, THETA, flags=np.array([0, 0, 0, 1, 0, 0]), ep=ep,
+                           modes=np.array([0, 0, 0, 0, 1]))
+    return make_chunk(x_r, np.round(x, 3), Ts, segment_starts(x_r.size, None))
+
+
+def test_a_weakly_determined_capture_delay_is_moved_to_the_middle_of_the_delays_that_fit_as_well(x_r):
+    from ident.diagnosis.candidates import centre_delay, effect_parameters
+
+    chunk = _capture_delay_recording(x_r, 0.003)
+    low = ModelSpec(THETA.copy(), ("time_delay",))
+    low.modes[4] = 1
+    low.ep[EP_INDEX["delay_s"]] = 0.0018  # where a fit on the flat side of the profile stops
+    low = fit_spec(low, chunk, fit_effects=False)
+    centred = centre_delay(low, chunk)
+    p = effect_parameters(centred, "time_delay")
+    lo, hi = p["delay_range_s"]
+    assert lo < 0.003 < hi  # the truth fits as well as the start
+    assert p["delay_s"] == pytest.approx(0.5 * (lo + hi))
+    assert p["delay_s"] == pytest.approx(0.003, rel=0.25)
+    assert sse(centred, chunk) <= 1.02 * sse(low, chunk)
+
+
+def test_a_parameter_with_a_range_is_held_by_later_fits(x_r):
+    chunk = _capture_delay_recording(x_r, 0.003)
+    spec = ModelSpec(THETA.copy(), ("time_delay",))
+    spec.modes[4] = 1
+    spec.ep[EP_INDEX["delay_s"]] = 0.002
+    spec.ranges["delay_s"] = (0.0015, 0.0025)
+    assert fit_spec(spec, chunk, max_iter=5).ep[EP_INDEX["delay_s"]] == 0.002
+    spec.ranges.clear()
+    assert fit_spec(spec, chunk, max_iter=5).ep[EP_INDEX["delay_s"]] != 0.002
+
+
+def test_a_delay_range_is_said_only_when_the_recording_leaves_it_open():
+    from ident.diagnosis.diagnose import _param_words
+    from ident.report import _param_text
+
+    wide = {"delay_s": 0.003, "where": "capture", "delay_range_s": [0.0013, 0.0047]}
+    sharp = {"delay_s": 0.001, "where": "actuation", "delay_range_s": [0.001, 0.001]}
+    assert _param_words("time_delay", wide) == "time delay 3.00 ms (capture; 1.30–4.70 ms fit equally well)"
+    assert _param_words("time_delay", sharp) == "time delay 1.00 ms (actuation)"
+    assert _param_text(wide["delay_range_s"]) == "0.0013–0.0047"
+    assert _param_text(sharp["delay_range_s"]) == "0.001"
+
+
 def test_summary_words_show_a_change_that_rounds_away_at_one_decimal():
     from ident.diagnosis.diagnose import _fit_words, _rms_words
 

@@ -433,7 +433,11 @@ def _param_words(effect: str, p: dict) -> str:
     if effect == "resonance":
         return f"resonance at {p['freq_hz']:.1f} Hz, damping {p['damping']:.3f}"
     if effect == "time_delay":
-        return f"time delay {1e3 * p['delay_s']:.2f} ms ({p['where']})"
+        words = f"time delay {1e3 * p['delay_s']:.2f} ms ({p['where']}"
+        lo, hi = p.get("delay_range_s", (p["delay_s"], p["delay_s"]))
+        if hi > 1.15 * lo:  # a weakly determined delay: say which ones fit as well
+            words += f"; {1e3 * lo:.2f}–{1e3 * hi:.2f} ms fit equally well"
+        return words + ")"
     if effect == "cyclic_error":
         return f"cyclic error, period {p['period_mm']:.3g} mm, amplitude {p['amplitude']:.3g} {p['amplitude_unit']}"
     if effect == "saturation":
@@ -685,10 +689,12 @@ def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gai
                rms_before: float = math.nan) -> Candidate:
     ps = [effect_parameters(s, eff) for s in sc.specs]
     params = dict(ps[0])
-    for k in params:
-        vals = [p[k] for p in ps if isinstance(p.get(k), float)]
-        if vals and isinstance(params[k], float):
-            params[k] = float(np.median(vals))
+    for k in params:  # the median over folds, of each end for a range
+        if isinstance(params[k], float):
+            params[k] = float(np.median([p[k] for p in ps if isinstance(p.get(k), float)]))
+        elif isinstance(params[k], list):
+            ends = np.array([p[k] for p in ps if isinstance(p.get(k), list)], dtype=float)
+            params[k] = [float(v) for v in np.median(ends, axis=0)]
     score = {
         "held_out_residual_reduction": float(gain),
         "required_reduction": float(need),
