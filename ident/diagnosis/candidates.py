@@ -381,6 +381,18 @@ def _backlash_start(spec: ModelSpec, params: dict, modes: dict) -> ModelSpec:
     return s
 
 
+def cascade_motor_share(theta: np.ndarray) -> float:
+    """ψ, the share of the position feedback that reads the motor, implied by θ of eq. 3.3.
+
+    A P-PI cascade (position gain Kp, velocity loop Kv + Ki/s on the motor) gives
+    ``u = Kv·Kp·(x_r − x_table) + Ki·Kp·∫(x_r − x_table) − Kv·ẋ − Ki·x_motor``: the position
+    term a2 = Kv·Kp + Ki reads the table with the command's gain b2 = Kv·Kp (θ[5]) and the
+    motor with the rest, ψ = 1 − b2/a2 (Table 3.3: 0.82).  A PID on the scale has b2 = a2, ψ = 0.
+    """
+    a2, b2 = float(theta[1]), float(theta[5])
+    return float(np.clip(1.0 - b2 / a2, 0.0, 1.0)) if a2 > 0.0 else 0.0
+
+
 def _apply(spec: ModelSpec, effect: str, params: dict, modes: dict) -> ModelSpec:
     s = spec.copy()
     s.effects = tuple(dict.fromkeys(spec.effects + (effect,)))
@@ -411,7 +423,7 @@ def start_groups(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict) -> 
         # controls, and a dead band on the output alone mimics stick-slip at reversals
         for g in BACKLASH_GAPS_MM:
             groups.append([({"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": psi}, {"backlash": 1})
-                           for psi in (0.0, 0.8)])
+                           for psi in (cascade_motor_share(spec.theta),)])
         return [[_backlash_start(spec, p, m) for p, m in g] for g in groups]
     elif effect == "stribeck":
         for r in (1.5, 3.0):
@@ -489,7 +501,7 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
             fits.append(_fit_effect_from(soft, effect, chunk, evidence, short_iter=8, max_iter=max_iter,
                                          groups=[[_backlash_start(soft, {"gap_mm": g, "motor_fraction": 0.8,
                                                                          "position_motor_share": psi}, {"backlash": 1})
-                                                  for psi in (0.0, 0.8)] for g in (0.01, 0.03)]))
+                                                  for psi in (cascade_motor_share(soft.theta),)] for g in (0.01, 0.03)]))
         # the gap inside a digital loop: the lost motion meets the sample-and-hold lag.  Fitted
         # with the coarse difference step as well: a loose PID loop rattles at every contact
         # and only the coarse step reaches its valley (a 99.8 % P-PI fit needs the fine one)
