@@ -302,6 +302,16 @@ def test_a_parameter_with_a_range_is_held_by_later_fits(x_r):
     assert fit_spec(spec, chunk, max_iter=5).ep[EP_INDEX["delay_s"]] != 0.002
 
 
+def test_the_motor_share_of_the_position_term_follows_from_the_controller_structure():
+    from ident.diagnosis.candidates import cascade_motor_share
+
+    # P-PI cascade of Table 3.3: a2 = K(Kd·Kp + Ki), b2 = K·Kp·Kd, ψ = Ki/(Kd·Kp + Ki) = 50.9/62.0
+    assert cascade_motor_share(THETA) == pytest.approx(1.0 - 11106.33 / 62009.83)
+    # PID of Table 3.4 on the scale: b2 = a2
+    assert cascade_motor_share(np.array([192.65, 44356.0, 316830.0, 0.0, 190.1, 44356.0, 441.0, -302.0])) == 0.0
+    assert cascade_motor_share(np.array([1.0, -5.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0])) == 0.0
+
+
 def test_a_delay_range_is_said_only_when_the_recording_leaves_it_open():
     from ident.diagnosis.diagnose import _param_words
     from ident.report import _param_text

@@ -388,6 +388,7 @@ def cascade_motor_share(theta: np.ndarray) -> float:
     ``u = Kv·Kp·(x_r − x_table) + Ki·Kp·∫(x_r − x_table) − Kv·ẋ − Ki·x_motor``: the position
     term a2 = Kv·Kp + Ki reads the table with the command's gain b2 = Kv·Kp (θ[5]) and the
     motor with the rest, ψ = 1 − b2/a2 (Table 3.3: 0.82).  A PID on the scale has b2 = a2, ψ = 0.
+    Velocity feed-forward Kv in the cascade adds Kp·Kv·Ki to b2: ψ then comes out low.
     """
     a2, b2 = float(theta[1]), float(theta[5])
     return float(np.clip(1.0 - b2 / a2, 0.0, 1.0)) if a2 > 0.0 else 0.0
@@ -417,10 +418,12 @@ def start_groups(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict) -> 
     vmax = float(np.max(np.abs(chunk.derivs[0]))) or 1.0
     groups: list[list[tuple[dict, dict]]] = []
     if effect == "backlash":
-        # mode 1 with the position term on the table (PID-like) or mostly on the motor (P-PI
-        # cascade: the velocity integral is the motor position).  Mode 0 (loop closed on the
-        # motor, the table recorded) is not started: a controller records the position it
-        # controls, and a dead band on the output alone mimics stick-slip at reversals
+        # mode 1 with the position term's motor share ψ that θ implies (0 for a PID on the
+        # scale, ≈ 0.8 for a P-PI cascade, whose velocity integral is the motor position; a
+        # second family at the other value ended within 1 % of the training cost with the
+        # P-PI gap 30 % small).  Mode 0 (loop closed on the motor, the table recorded) is not
+        # started: a controller records the position it controls, and a dead band on the
+        # output alone mimics stick-slip at reversals
         for g in BACKLASH_GAPS_MM:
             groups.append([({"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": psi}, {"backlash": 1})
                            for psi in (cascade_motor_share(spec.theta),)])
