@@ -70,6 +70,8 @@ _MODE_SLOT = {"backlash": 0, "time_delay": 1, "cyclic_error": 2, "resonance": 3}
 #: Recordings longer than this (s) get the shorter searches, to keep the diagnosis within its
 #: time budget: one hold-out fold and one second effect (diagnose), short delay profiles (here).
 LONG_S = 10.0
+#: Base re-fit iterations at each point of a delay profile (fewer on a long recording).
+PROFILE_ITER, PROFILE_ITER_LONG = 25, 8
 #: Starting gaps of the backlash fit, mm (one profile start each, in every variant).
 BACKLASH_GAPS_MM = (0.003, 0.01, 0.02, 0.04, 0.08)
 
@@ -97,6 +99,11 @@ class Chunk:
     @property
     def n(self) -> int:
         return int(self.x_r.size)
+
+    @property
+    def long(self) -> bool:
+        """Longer than :data:`LONG_S`: the shorter searches (time budget)."""
+        return self.n * self.Ts > LONG_S
 
     def scored(self, mask: np.ndarray) -> "Chunk":
         """The same samples with only ``mask`` (and not the restart transients) scored."""
@@ -514,23 +521,22 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
                                                   for psi in (cascade_motor_share(soft.theta),)] for g in (0.01, 0.03)]))
         # the gap inside a digital loop: the lost motion meets the sample-and-hold lag.  Fitted
         # with the coarse difference step as well: a loose PID loop rattles at every contact
-        # and only the coarse step reaches its valley (a 99.8 % P-PI fit needs the fine one)
-        # (a base already on the sampled controller had its fine-step fit above)
+        # and only the coarse step reaches its valley (a 99.8 % P-PI fit needs the fine one;
+        # a base already on the sampled controller had its fine-step fit above).
         # With the coarse step on a loop that reads the position on the scale (ψ = 0, PID)
-        # every gap start is fitted jointly (up to LONG_S of data): the rattle at each contact
-        # makes the short profile step rank the starts badly — seed 30 000's deepest valley
-        # (training cost 0.074 × the base's against 0.168 ×, held-out 0.110 × against 0.207 ×,
-        # gap 0.88 × the truth against 0.74 ×) is reached from the start it ranked third.  On a
-        # P-PI cascade (ψ ≈ 0.8) the extra fits found no better gap and once a valley that
-        # predicted the held-out data 46 % worse (seed 30 003, motor share 0.3)
-        every = chunk.n * chunk.Ts <= LONG_S and cascade_motor_share(sampled.theta if sampled is not None
-                                                                     else spec.theta) < 0.5
+        # every gap start is fitted jointly (not on a long recording): the rattle at each
+        # contact makes the short profile step rank the starts badly — seed 30 000's deepest
+        # valley (training cost 0.074 × the base's against 0.168 ×, held-out 0.110 × against
+        # 0.207 ×, gap 0.88 × the truth against 0.74 ×) is reached from the start it ranked
+        # third.  On a P-PI cascade (ψ ≈ 0.8) the extra fits found no better gap and once a
+        # valley that predicted the held-out data 46 % worse (seed 30 003, motor share 0.3)
+        every = not chunk.long and cascade_motor_share((spec if sampled is None else sampled).theta) < 0.5
         on_sampled = [(spec, FD_STEP_ROUGH)] if spec.modes[4] else [(sampled, FD_STEP), (sampled, FD_STEP_ROUGH)]
         for s0, h in on_sampled:
             fits.append(_fit_effect_from(s0, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter,
                                          fd_step=h, every_start=every and h == FD_STEP_ROUGH))
         best = min(fits, key=lambda f: sse(f, chunk))
-        if chunk.n * chunk.Ts <= LONG_S:
+        if not chunk.long:
             # the base identified without the gap took part of the lost motion as a soft
             # velocity loop (seed 30 006: a1 76 against the drive's 193); the joint fit raises
             # a1 only part of the way (149) before the contacts start to rattle.  Restarted
@@ -661,7 +667,7 @@ def fit_delay_profile(spec: ModelSpec, chunk: Chunk, *,
     """
     Ts = chunk.Ts
     if profile_iter is None:
-        profile_iter = 8 if chunk.n * Ts > LONG_S else 25
+        profile_iter = PROFILE_ITER_LONG if chunk.long else PROFILE_ITER
     k = EP_INDEX["delay_s"]
 
     def profile(start: ModelSpec, d: float) -> tuple[float, ModelSpec | None]:
@@ -703,7 +709,7 @@ def fit_delay_profile(spec: ModelSpec, chunk: Chunk, *,
         if s1 is not None and v < best_v:
             best_v, best = v, s1
     fits = [fit_spec(best, chunk, max_iter=max_iter)]
-    if spec.modes[4] and chunk.n * Ts <= LONG_S:
+    if spec.modes[4] and not chunk.long:
         # the valley of a dead time inside the loop can lie far from the base identified
         # without it (gains 2-3x lower): start there from the regression that knows the delay
         # (the hold and the sampled velocity add about a sample: m samples in the regression
@@ -751,7 +757,7 @@ def centre_delay(spec: ModelSpec, chunk: Chunk, tol: float = DELAY_PROFILE_TOL) 
     d_hat = float(spec.ep[k])
     if "time_delay" not in spec.effects or not d_hat > 0.0:
         return spec
-    iters = 8 if chunk.n * chunk.Ts > LONG_S else 25
+    iters = PROFILE_ITER_LONG if chunk.long else PROFILE_ITER
     fits: dict[float, tuple[float, ModelSpec]] = {1.0: (sse(spec, chunk), spec)}
 
     def inside(r: float) -> bool:
