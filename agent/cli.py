@@ -21,7 +21,7 @@ from typing import Callable
 
 import typer
 
-from agent.errors import InputError, RapidIdentError, RapidIdentWarning
+from core.errors import InputError, RapidIdentError, RapidIdentWarning
 
 app = typer.Typer(
     add_completion=False,

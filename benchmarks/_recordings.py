@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 from scipy.io import loadmat
 
-from drivers.sim.virtual_cnc import run_programs
+from virtual_cnc.machine_run import run_programs
 from gcode_gen import dialects
 from gcode_gen.excitation import identification_programs
-from ident.recording import AxisTrace, Recording
+from core.recording import AxisTrace, Recording
 
 ROOT = Path(__file__).resolve().parents[1]
 EMPS = ROOT.parent / "shared" / "data" / "emps" / "DATA_EMPS.mat"

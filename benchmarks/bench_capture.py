@@ -49,13 +49,13 @@ from drivers.endpoints.can_endpoint import CanEndpoint
 from drivers.endpoints.modbus_endpoint import encode_records
 from drivers.endpoints.source import RealTimeSource, stream_info_for
 from drivers.modbus_map import default_map
-from drivers.recorder import McapRecorder, write_recording_mcap
+from core.writer import McapRecorder, write_recording_mcap
 from drivers.registry import open_driver
 from drivers.transports.modbus import ModbusDriver
 from drivers.transports.serial_framing import BinaryCodec
 from drivers.url import parse_port_url
-from ident.loading import load_recording
-from ident.recording import AxisTrace, Recording
+from core.reader import load_recording
+from core.recording import AxisTrace, Recording
 
 AXES = "XYZABC"
 Ts = 0.001  # s, the served sample period (1 kHz)

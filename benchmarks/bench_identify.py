@@ -18,7 +18,7 @@ from pathlib import Path
 
 from _recordings import preset_recording
 from agent.workflows.identify import IdentifyOptions, identify
-from drivers.recorder import write_recording_mcap
+from core.writer import write_recording_mcap
 
 
 def main() -> None:

@@ -50,8 +50,8 @@ def trajectory(n: int, seed: int = 0) -> np.ndarray:
 
 
 def run_once(substeps: int) -> float:
-    from drivers.sim.presets import DEFAULT_MACHINE, load_machine
-    from drivers.sim.servo import simulate_machine
+    from virtual_cnc.presets import DEFAULT_MACHINE, load_machine
+    from virtual_cnc.servo import simulate_machine
 
     m = load_machine(DEFAULT_MACHINE)
     m = replace(m, axes={k: replace(a, substeps=substeps) for k, a in m.axes.items()})

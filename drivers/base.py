@@ -12,25 +12,10 @@ import abc
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from core.recording import Sample
 from drivers.url import PortURL
 
 __all__ = ["Sample", "StreamInfo", "CaptureStats", "Driver"]
-
-
-@dataclass(frozen=True)
-class Sample:
-    """One controller sample tick, every axis.
-
-    ``counter`` is the controller's sample counter (monotonic, wraps handled by the
-    driver); ``t_s`` = counter x sample period, in s, controller clock.  Positions in
-    mm (deg for rotary axes), in the order of :attr:`StreamInfo.axes`.
-    """
-
-    counter: int
-    t_s: float
-    commanded: tuple[float, ...]
-    actual: tuple[float, ...]
-    segment: int = 0
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,4 @@
-"""The capture loop shared by every transport: driver -> :class:`~drivers.recorder.McapRecorder`.
+"""The capture loop shared by every transport: driver -> :class:`~core.writer.McapRecorder`.
 
 :func:`capture` opens the driver picked by the ``--port`` URL scheme, writes the
 stream description into the log's channel metadata, then records every sample as it
@@ -46,9 +46,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterator
 
-from agent.errors import InputError, TransportError
+from core.errors import InputError, TransportError
 from drivers.base import Driver, Sample, StreamInfo
-from drivers.recorder import McapRecorder
+from core.writer import McapRecorder
 from drivers.registry import open_driver
 from drivers.url import parse_port_url
 
@@ -197,7 +197,7 @@ def capture(
     read_timeout : longest wait for data per driver read, s (bounds the reaction to Ctrl-C).
 
     Returns the :class:`CaptureSummary` (also written into the log).  Raises
-    :class:`~agent.errors.InputError` / :class:`~agent.errors.TransportError` before
+    :class:`~core.errors.InputError` / :class:`~core.errors.TransportError` before
     anything is recorded (bad URL, unknown axis, port cannot be opened); a transport
     failure after recording has started ends the capture with ``end="transport error"``,
     the message in ``summary.error`` and a complete log.

@@ -55,7 +55,7 @@ try:
 except ModuleNotFoundError:  # Python 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-from agent.errors import MachineError
+from core.errors import MachineError
 
 __all__ = [
     "AxisRegisters",

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import importlib
 
-from agent.errors import InputError, TransportError
+from core.errors import InputError, TransportError
 from drivers.base import Driver
 from drivers.url import PortURL, parse_port_url
 

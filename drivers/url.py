@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from urllib.parse import parse_qsl, urlsplit
 
-from agent.errors import InputError
+from core.errors import InputError
 
 __all__ = ["PortURL", "parse_port_url"]
 

@@ -42,7 +42,7 @@ from typing import Sequence
 
 import numpy as np
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen.program import AXIS_LETTERS, Block, Toolpath
 
 __all__ = ["ExcitationSpec", "identification_programs", "low_speed_program", "high_speed_program"]

@@ -41,7 +41,7 @@ from typing import Sequence
 
 import numpy as np
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen.program import Block, Program
 
 __all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile"]

@@ -20,7 +20,7 @@ Heidenhain conversational (``heidenhain``)
     ``CYCL DEF 9`` dwell, ``BLK FORM``/``TOOL CALL``/``TOOL DEF``/``STOP`` (no motion,
     accepted), ``M`` words as above, ``;`` comments.
 
-Anything else raises :class:`~agent.errors.ProgramError` naming the word and the line.
+Anything else raises :class:`~core.errors.ProgramError` naming the word and the line.
 Comments of the form ``key=value`` before the first motion block become
 ``Program.header``.  Feeds are converted to mm/s, positions to absolute mm.
 """
@@ -31,7 +31,7 @@ import math
 import re
 from pathlib import Path
 
-from agent.errors import InputError, ProgramError
+from core.errors import InputError, ProgramError
 from gcode_gen.program import AXIS_LETTERS, Block, Program
 
 __all__ = ["parse_program", "read_program", "detect_dialect", "DIALECT_NAMES"]

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen.program import AXIS_LETTERS, Block, Toolpath
 
 __all__ = ["circle", "diamond", "TOOLPATHS"]

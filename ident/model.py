@@ -53,7 +53,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.errors import IdentificationError, InputError
+from core.errors import IdentificationError, InputError
 
 __all__ = [
     "DriveModel",

@@ -57,10 +57,10 @@ from typing import TYPE_CHECKING, Literal, Mapping
 
 import numpy as np
 
-from agent.errors import IdentificationError, InputError, RecordingError, RapidIdentWarning
+from core.errors import IdentificationError, InputError, RecordingError, RapidIdentWarning
 
 if TYPE_CHECKING:
-    from ident.recording import Recording
+    from core.recording import Recording
 
 __all__ = [
     "segment_slices",
@@ -633,7 +633,7 @@ def direction(
 
 
 def prepare_recording(rec: "Recording", *, jitter_tol: float = 0.01, gap_factor: float = 1.5) -> "Recording":
-    """Check and regularise a :class:`ident.recording.Recording` on load.
+    """Check and regularise a :class:`core.recording.Recording` on load.
 
     Time is checked and regularised once for all axes (:func:`regularise_sampling`), each
     axis is checked for NaN/inf and units (:func:`check_motion`, warnings).  Motion and
@@ -642,7 +642,7 @@ def prepare_recording(rec: "Recording", *, jitter_tol: float = 0.01, gap_factor:
 
     Returns a new Recording on the regular grid with renumbered segments.
     """
-    from ident.recording import AxisTrace, Recording
+    from core.recording import AxisTrace, Recording
 
     n = rec.n_samples
     if n == 0:

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.errors import InputError
+from core.errors import InputError
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel, alphas_from_search
 from ident.preprocessing import shift_command

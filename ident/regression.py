@@ -30,7 +30,7 @@ from typing import Literal
 
 import numpy as np
 
-from agent.errors import IdentificationError, InputError
+from core.errors import IdentificationError, InputError
 from ident import preprocessing as pp
 
 __all__ = ["Regression", "build_regression", "lstsq_scaled", "COLUMNS"]

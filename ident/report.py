@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.errors import InputError
+from core.errors import InputError
 from ident.results import AxisResult, AxisTraces, IdentifyResult
 
 __all__ = ["write_report", "render_report"]

@@ -33,10 +33,10 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from drivers.recorder import write_recording_mcap
-from drivers.sim.virtual_cnc import run_programs
-from ident.loading import load_recording
-from ident.recording import Recording
+from core.writer import write_recording_mcap
+from virtual_cnc.machine_run import run_programs
+from core.reader import load_recording
+from core.recording import Recording
 
 AGENT = [sys.executable, "-m", "agent.cli"]
 LOG = "log.mcap"  # where the helpers capture to, in the test's working directory

@@ -16,11 +16,11 @@ import can
 import numpy as np
 import pytest
 
-from agent.errors import InputError, TransportError, TransportTimeout
+from core.errors import InputError, TransportError, TransportTimeout
 from drivers.endpoints.can_endpoint import CanEndpoint
 from drivers.endpoints.source import FaultPlan, RealTimeSource, stream_info_for
 from drivers.registry import open_driver
-from ident.recording import AxisTrace, Recording
+from core.recording import AxisTrace, Recording
 
 
 UDP_MULTICAST_NEEDS = "python-can udp_multicast needs a multicast route (e.g. `ip route add 239.0.0.0/8 dev lo`)"

@@ -14,7 +14,7 @@ from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, assert_complete_and_exa
                             assert_recorded_all_but, assert_rejected_frames_are_dropped,
                             assert_sigkill_loses_at_most_one_second, reconnected_log, serve_and_capture, served_source)
 from _capture_procs import program, simulated  # noqa: F401  (module-scoped fixtures, requested by name)
-from drivers.sim.virtual_cnc import run_programs
+from virtual_cnc.machine_run import run_programs
 
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(not udp_multicast_available(), reason=UDP_MULTICAST_NEEDS)]
 

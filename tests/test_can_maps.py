@@ -7,7 +7,7 @@ import struct
 import canopen
 import pytest
 
-from agent.errors import InputError
+from core.errors import InputError
 from drivers.transports import canopen_map as com
 from drivers.transports.can_ticks import CounterUnwrapper, TickAssembler
 from drivers.transports.dbc_map import DEFAULT_DBC, load_dbc, per_mm

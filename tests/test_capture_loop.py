@@ -18,14 +18,14 @@ import numpy as np
 import pytest
 
 from _capture_procs import AGENT
-from agent.errors import InputError, TransportError, TransportTimeout
+from core.errors import InputError, TransportError, TransportTimeout
 from drivers import registry
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.capture import capture
 from drivers.endpoints.serial_endpoint import SerialEndpoint
 from drivers.endpoints.source import FaultPlan, RealTimeSource, stream_info_for
-from ident.loading import load_recording
-from ident.recording import AxisTrace, Recording
+from core.reader import load_recording
+from core.recording import AxisTrace, Recording
 
 
 def random_walk(n: int = 1500, axes: str = "XYZ", t0_counter: int = 0, seed: int = 0) -> Recording:

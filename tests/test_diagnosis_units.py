@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.errors import InputError
+from core.errors import InputError
 from ident.diagnosis import diagnose
 from ident.diagnosis.augmented import EP_INDEX, N_EP, segment_starts, simulate_augmented
 from ident.diagnosis.candidates import ModelSpec, fit_spec, make_chunk, sse

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.errors import RapidIdentWarning
+from core.errors import RapidIdentWarning
 from ident import preprocessing as pp
 from ident.model import Bounds, DriveModel
 from ident.refine import model_fit, refine

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen import dialects
 from gcode_gen.excitation import identification_programs
 from gcode_gen.interpreter import parse_program

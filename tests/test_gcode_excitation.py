@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen.excitation import ExcitationSpec, high_speed_program, identification_programs, low_speed_program
 
 

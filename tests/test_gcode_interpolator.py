@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen import dialects
 from gcode_gen.excitation import identification_programs
 from gcode_gen.interpolator import concatenate, interpolate, interpolate_programs, plan_profile

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from agent.errors import InputError, ProgramError
+from core.errors import InputError, ProgramError
 from gcode_gen.interpreter import detect_dialect, parse_program, read_program
 
 TABLE_3_2 = """\

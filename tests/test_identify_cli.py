@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivers.recorder import write_recording_csv
-from ident.recording import AxisTrace, Recording
+from core.writer import write_recording_csv
+from core.recording import AxisTrace, Recording
 
 from typer.testing import CliRunner
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import pytest
 
 from agent.workflows.identify import IdentifyOptions, identify
-from drivers.recorder import write_recording_mcap
-from drivers.sim.virtual_cnc import run_programs
+from core.writer import write_recording_mcap
+from virtual_cnc.machine_run import run_programs
 from gcode_gen import dialects
 from gcode_gen.excitation import identification_programs
 

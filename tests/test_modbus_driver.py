@@ -17,13 +17,13 @@ import pytest
 from pymodbus.client import ModbusTcpClient
 from pymodbus.pdu import DecodePDU
 
-from agent.errors import InputError, TransportError
+from core.errors import InputError, TransportError
 from drivers.endpoints.modbus_endpoint import ModbusEndpoint
 from drivers.endpoints.source import FaultPlan, RealTimeSource, stream_info_for
 from drivers.modbus_map import default_map
 from drivers.registry import open_driver
 from drivers.transports.modbus import ALLOWED_FUNCTION_CODES, ModbusDriver, ReadOnlyViolation, _read_only_guard
-from ident.recording import AxisTrace, Recording
+from core.recording import AxisTrace, Recording
 
 SCALE = 1e-6  # mm per count of the default map
 

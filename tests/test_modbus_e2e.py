@@ -19,8 +19,8 @@ from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, LOG, Server, assert_com
                             assert_sigkill_loses_at_most_one_second, assert_values_exact, injected_faults,
                             read_fault_log, serve_and_capture, start_capture, wait_for_size)
 from _capture_procs import program, simulated  # noqa: F401  (module-scoped fixtures, requested by name)
-from drivers.sim.virtual_cnc import run_programs
-from ident.loading import load_recording
+from virtual_cnc.machine_run import run_programs
+from core.reader import load_recording
 
 pytestmark = pytest.mark.slow
 

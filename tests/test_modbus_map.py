@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.errors import MachineError
+from core.errors import MachineError
 from drivers.modbus_map import (
     MAX_READ_REGISTERS,
     decode_info,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from agent.errors import IdentificationError, InputError
+from core.errors import IdentificationError, InputError
 from ident.model import (Bounds, DriveModel, alphas_from_search, alphas_jacobian, canonical_search,
                          factorisations)
 

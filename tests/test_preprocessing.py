@@ -7,9 +7,9 @@ import warnings
 import numpy as np
 import pytest
 
-from agent.errors import IdentificationError, RapidIdentWarning, RecordingError
+from core.errors import IdentificationError, RapidIdentWarning, RecordingError
 from ident import preprocessing as pp
-from ident.recording import AxisTrace, Recording
+from core.recording import AxisTrace, Recording
 
 TS = 1e-3
 

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from agent.errors import RapidIdentWarning, RecordingError
+from core.errors import RapidIdentWarning, RecordingError
 from drivers.base import Sample
-from drivers.recorder import McapRecorder, write_recording_csv, write_recording_mcap
-from ident.loading import load_recording
-from ident.recording import AxisTrace, Recording
+from core.writer import McapRecorder, write_recording_csv, write_recording_mcap
+from core.reader import load_recording
+from core.recording import AxisTrace, Recording
 
 
 @pytest.fixture

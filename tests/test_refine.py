@@ -106,7 +106,7 @@ def test_unstable_start_is_moved_inside_the_bounds_first():
 
 
 def test_unknown_optimizer_is_an_input_error():
-    from agent.errors import InputError
+    from core.errors import InputError
 
     x_r = command(4, n=500)
     with pytest.raises(InputError, match="optimizer must be 'lm' or 'trf'"):

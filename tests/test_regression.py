@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from agent.errors import IdentificationError
+from core.errors import IdentificationError
 from ident import preprocessing as pp
 from ident.model import DriveModel
 from ident.regression import COLUMNS, build_regression, lstsq_scaled
@@ -156,7 +156,7 @@ def test_lowpass_and_threshold_settings_are_recorded():
 
 
 def test_bad_options_are_one_line_input_errors():
-    from agent.errors import InputError
+    from core.errors import InputError
 
     Ts = 1e-3
     x_r = random_moves(8, 6, Ts)

@@ -7,7 +7,7 @@ import zlib
 
 import pytest
 
-from agent.errors import InputError
+from core.errors import InputError
 from drivers.transports.serial_framing import (
     AsciiCodec,
     BinaryCodec,

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from agent.errors import InputError
-from drivers.sim.drive import Encoder
-from drivers.sim.effects import (
+from core.errors import InputError
+from virtual_cnc.drive import Encoder
+from virtual_cnc.effects import (
     EFFECTS,
     Backlash,
     CyclicError,
@@ -21,8 +21,8 @@ from drivers.sim.effects import (
     format_effect,
     parse_effect,
 )
-from drivers.sim.presets import load_machine
-from drivers.sim.servo import simulate_axis_response
+from virtual_cnc.presets import load_machine
+from virtual_cnc.servo import simulate_axis_response
 
 from _moves import point_to_point
 

@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agent.errors import MachineError
-from drivers.sim.drive import AxisDrive, Controller, Encoder, Plant, closed_loop_parameters, smc_gains
-from drivers.sim.effects import Backlash, TimeDelay
-from drivers.sim.presets import DEFAULT_MACHINE, PRESETS, load_machine, machine_to_toml
+from core.errors import MachineError
+from virtual_cnc.drive import AxisDrive, Controller, Encoder, Plant, closed_loop_parameters, smc_gains
+from virtual_cnc.effects import Backlash, TimeDelay
+from virtual_cnc.presets import DEFAULT_MACHINE, PRESETS, load_machine, machine_to_toml
 
 # "Actual" columns of thesis Tables 3.3 (P-PI), 3.4 (PID), 3.5 (SMC).
 TABLES = {
@@ -149,7 +149,7 @@ def test_missing_machine_file_is_reported(tmp_path):
 
 def test_machine_forces_its_servo_period_on_every_axis():
     ax = AxisDrive(Controller("pid", Kp=40, Ki=300, Kd=0.2), Plant(J=1, B=1, K=1000), Encoder(), Ts=0.002)
-    from drivers.sim.presets import Machine
+    from virtual_cnc.presets import Machine
 
     m = Machine("m", "", {"X": ax}, Ts=0.0005)
     assert m.axes["X"].Ts == 0.0005

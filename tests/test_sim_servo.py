@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from agent.errors import InputError
-from drivers.sim.drive import Encoder, closed_loop_parameters
-from drivers.sim.effects import Backlash, Resonance, Stribeck
-from drivers.sim.presets import load_machine
-from drivers.sim.servo import simulate_axis, simulate_axis_response, simulate_machine
+from core.errors import InputError
+from virtual_cnc.drive import Encoder, closed_loop_parameters
+from virtual_cnc.effects import Backlash, Resonance, Stribeck
+from virtual_cnc.presets import load_machine
+from virtual_cnc.servo import simulate_axis, simulate_axis_response, simulate_machine
 
 import _moves
 

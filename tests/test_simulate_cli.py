@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 from typer.testing import CliRunner
 
 from agent import cli
-from ident.loading import load_recording
+from core.reader import load_recording
 
 cli._register()
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from _synthetic import PID_X, PPI_X, build_regression, simulate
-from agent.errors import IdentificationError, InputError, RapidIdentWarning
+from core.errors import IdentificationError, InputError, RapidIdentWarning
 from ident.model import Bounds, DriveModel, alphas_from_search
 from ident.solvers import ReducedObjective, solve, solve_exact, solve_ls
 from ident.solvers.common import cost_eq312

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from _synthetic import PID_X, build_regression, simulate
-from agent.errors import InputError
+from core.errors import InputError
 from ident.model import Bounds
 from ident.solvers import ReducedObjective, solve_exact, solve_ga
 

@@ -17,7 +17,7 @@ def capture(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no live progress line"),
 ) -> None:
     """Record a controller's commanded and actual positions until the program ends, --duration, or Ctrl-C."""
-    from agent.errors import TransportError
+    from core.errors import TransportError
     from drivers.capture import capture as run_capture
 
     wanted = [a.strip() for a in axes.split(",") if a.strip()] if axes else None

@@ -16,7 +16,7 @@ from typing import Optional
 
 import typer
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen import dialects
 from gcode_gen.excitation import identification_programs
 from gcode_gen.toolpaths import TOOLPATHS

@@ -8,7 +8,7 @@ from typing import List, Optional
 
 import typer
 
-from agent.errors import InputError
+from core.errors import InputError
 
 
 def identify(

@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from agent.errors import InputError
+from core.errors import InputError
 
 
 def simulate(
@@ -21,8 +21,8 @@ def simulate(
     csv: Optional[Path] = typer.Option(None, "--csv", help="Also write the SPEC §4 CSV to this file."),
 ) -> None:
     """Run PROGRAMs on the virtual CNC and write a recording in exactly the format a capture writes."""
-    from drivers.recorder import write_recording_csv, write_recording_mcap
-    from drivers.sim.virtual_cnc import run_programs
+    from core.writer import write_recording_csv, write_recording_mcap
+    from virtual_cnc.machine_run import run_programs
 
     if out.suffix.lower() != ".mcap":
         raise InputError(f"-o {out}: the log must be a .mcap file (use --csv for CSV)")

@@ -16,13 +16,13 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from agent.errors import IdentificationError, InputError, RecordingError
+from core.errors import IdentificationError, InputError, RecordingError
 from ident.contour import contour_error
-from ident.loading import load_recording
+from core.reader import load_recording
 from ident.metrics import FitResult, fit_result
 from ident.model import TWO_PI, Bounds, DriveModel
 from ident.preprocessing import prepare_recording, shift_command
-from ident.recording import Recording
+from core.recording import Recording
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
 from ident.results import AxisResult, AxisTraces, ContourResult, IdentifyResult

@@ -27,7 +27,7 @@ import threading
 import time
 from typing import Any, ClassVar
 
-from agent.errors import InputError
+from core.errors import InputError
 from drivers.base import StreamInfo
 from drivers.endpoints.source import RealTimeSource
 

@@ -51,7 +51,7 @@ from typing import Any
 import can
 import numpy as np
 
-from agent.errors import InputError, TransportError
+from core.errors import InputError, TransportError
 from drivers.base import StreamInfo
 from drivers.endpoints.base import Endpoint
 from drivers.endpoints.source import RealTimeSource

@@ -56,7 +56,7 @@ from pymodbus.exceptions import NoSuchIdException
 from pymodbus.framer import FramerType
 from pymodbus.server import ModbusSerialServer, ModbusTcpServer
 
-from agent.errors import InputError, MachineError, TransportError
+from core.errors import InputError, MachineError, TransportError
 from drivers.base import StreamInfo
 from drivers.endpoints.base import Endpoint
 from drivers.endpoints.source import RealTimeSource

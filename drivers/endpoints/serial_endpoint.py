@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.errors import InputError
+from core.errors import InputError
 from drivers.base import StreamInfo
 from drivers.endpoints.base import Endpoint
 from drivers.endpoints.source import RealTimeSource

@@ -1,7 +1,7 @@
 """The ``agent serve`` workflow: run programs on the virtual CNC, then serve the result in real time.
 
-Steps: build the :class:`~ident.recording.Recording` (the G-code programs through
-:func:`drivers.sim.virtual_cnc.run_programs`, or an existing log given with
+Steps: build the :class:`~core.recording.Recording` (the G-code programs through
+:func:`virtual_cnc.machine_run.run_programs`, or an existing log given with
 ``recording=``), wrap it in a :class:`~drivers.endpoints.source.RealTimeSource` with the
 fault plan, pick the transport's endpoint from :data:`ENDPOINTS`, start it, print
 ``port: <url>`` as the FIRST line of stdout (flushed: a test or script reads it to know
@@ -22,10 +22,10 @@ import threading
 from pathlib import Path
 from typing import Any, Sequence, TextIO
 
-from agent.errors import InputError, TransportError
+from core.errors import InputError, TransportError
 from drivers.endpoints.base import Endpoint, parse_endpoint_options
 from drivers.endpoints.source import FaultPlan, RealTimeSource, stream_info_for
-from ident.recording import Recording
+from core.recording import Recording
 
 __all__ = ["ENDPOINTS", "endpoint_class", "build_recording", "serve"]
 
@@ -57,7 +57,7 @@ def build_recording(programs: Sequence[str | Path] = (), machine: str | Path | N
     if recording is not None:
         if programs:
             raise InputError("give either --program or --recording, not both")
-        from ident.loading import load_recording
+        from core.reader import load_recording
 
         return load_recording(recording)
     if not programs:
@@ -66,7 +66,7 @@ def build_recording(programs: Sequence[str | Path] = (), machine: str | Path | N
         if not Path(p).is_file():
             raise InputError(f"--program {p}: no such file")
     try:
-        from drivers.sim.virtual_cnc import run_programs
+        from virtual_cnc.machine_run import run_programs
     except ImportError as exc:
         raise TransportError(f"the virtual CNC is not available: {exc}") from exc
     return run_programs([Path(p) for p in programs], machine=machine, effects=list(effects), seed=seed)

@@ -18,7 +18,7 @@ from typing import Iterator
 import numpy as np
 
 from drivers.base import Sample, StreamInfo
-from ident.recording import Recording
+from core.recording import Recording
 
 __all__ = ["FaultPlan", "RealTimeSource", "stream_info_for"]
 

@@ -54,7 +54,7 @@ from typing import Any
 
 import can
 
-from agent.errors import InputError, TransportError, TransportTimeout
+from core.errors import InputError, TransportError, TransportTimeout
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.transports import canopen_map as com
 from drivers.transports.can_ticks import CounterUnwrapper, TickAssembler

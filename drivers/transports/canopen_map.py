@@ -25,7 +25,7 @@ from pathlib import Path
 import canopen
 from canopen.objectdictionary import datatypes as dt
 
-from agent.errors import InputError, TransportError
+from core.errors import InputError, TransportError
 
 __all__ = [
     "POSITION_DEMAND", "POSITION_ACTUAL", "PROGRAM_STATUS", "STATE_ENDED", "FIXTURES",

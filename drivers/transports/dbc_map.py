@@ -22,7 +22,7 @@ from pathlib import Path
 
 import cantools
 
-from agent.errors import InputError
+from core.errors import InputError
 
 __all__ = ["DbcPart", "DbcLayout", "load_dbc", "per_mm", "DEFAULT_DBC"]
 

@@ -64,7 +64,7 @@ from pymodbus.exceptions import ConnectionException, ModbusException
 from pymodbus.framer import FramerType
 from pymodbus.framer.rtu import FramerRTU
 
-from agent.errors import InputError, MachineError, TransportError
+from core.errors import InputError, MachineError, TransportError
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.modbus_map import (
     STATUS_ENDED,

@@ -398,7 +398,7 @@ CODECS: dict[str, type] = {"binary": BinaryCodec, "ascii": AsciiCodec}
 
 def codec_for(fmt: str):
     """A fresh codec for ``format=binary|ascii``; a one-line error for anything else."""
-    from agent.errors import InputError
+    from core.errors import InputError
 
     try:
         return CODECS[fmt]()

@@ -24,7 +24,7 @@ readiness to read but returned no data" or EIO).  The driver then re-opens the s
 path every 0.2 s for ``reconnect`` s (udev gives the adapter back under the same
 /dev/serial/by-id name); on success it counts a reconnect and carries on, the samples
 missed meanwhile showing as a counter gap; otherwise it raises a one-line
-:class:`~agent.errors.TransportError`.
+:class:`~core.errors.TransportError`.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import time
 
 import serial
 
-from agent.errors import InputError, TransportError, TransportTimeout
+from core.errors import InputError, TransportError, TransportTimeout
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.transports.serial_framing import EndFrame, InfoFrame, SampleFrame, codec_for
 from drivers.url import PortURL

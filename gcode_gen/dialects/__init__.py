@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen.dialects import heidenhain, iso, linuxcnc
 from gcode_gen.program import Toolpath
 

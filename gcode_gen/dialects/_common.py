@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from agent.errors import InputError
+from core.errors import InputError
 
 
 def coord(value: float, decimals: int, *, plus: bool = False) -> str:

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import re
 
-from agent.errors import InputError
+from core.errors import InputError
 from gcode_gen.dialects._common import coord, feed_per_min, header_comment, header_items
 from gcode_gen.program import Toolpath
 

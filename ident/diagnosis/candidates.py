@@ -801,7 +801,7 @@ def chunk_regression(chunk: Chunk) -> Regression | None:
 
     None when it cannot be built (too few samples, no motion): no regression start then.
     """
-    from agent.errors import RapidIdentError
+    from core.errors import RapidIdentError
     from ident.regression import build_regression
 
     seg = np.cumsum(chunk.starts) - 1

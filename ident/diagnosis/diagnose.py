@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.errors import InputError
+from core.errors import InputError
 from ident.diagnosis.augmented import EFFECTS, segment_starts
 from ident.diagnosis.candidates import (
     LONG_S,

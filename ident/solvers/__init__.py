@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from agent.errors import InputError
+from core.errors import InputError
 from ident.model import Bounds
 from ident.solvers.common import ReducedObjective, SolverResult
 from ident.solvers.exact import solve_exact

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from agent.errors import IdentificationError, InputError
+from core.errors import IdentificationError, InputError
 from ident.model import THETA_NAMES, Bounds, DriveModel, alphas_from_search, alphas_jacobian
 
 __all__ = ["SolverResult", "ReducedObjective", "check_regression", "cost_eq312", "resolve_box"]

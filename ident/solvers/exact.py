@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from agent.errors import IdentificationError, InputError, RapidIdentWarning
+from core.errors import IdentificationError, InputError, RapidIdentWarning
 from ident.model import Bounds, DriveModel, canonical_search
 from ident.solvers.common import ReducedObjective, SolverResult, resolve_box
 

@@ -58,7 +58,7 @@ import time
 
 import numpy as np
 
-from agent.errors import InputError
+from core.errors import InputError
 from ident.model import Bounds, alphas_from_search, canonical_search
 from ident.solvers.common import ReducedObjective, SolverResult, resolve_box
 

@@ -18,7 +18,7 @@ import warnings
 
 import numpy as np
 
-from agent.errors import IdentificationError, RapidIdentWarning
+from core.errors import IdentificationError, RapidIdentWarning
 from ident.model import Bounds, DriveModel
 from ident.solvers.common import SolverResult, check_regression, cost_eq312
 

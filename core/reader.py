@@ -19,9 +19,9 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Message, Metadata
 from mcap.stream_reader import StreamReader
 
-from agent.errors import RapidIdentWarning, RecordingError
-from drivers.log_format import EVENTS_TOPIC, SAMPLES_TOPIC, SUMMARY_METADATA
-from ident.recording import AxisTrace, Recording
+from core.errors import RapidIdentWarning, RecordingError
+from core.log_format import EVENTS_TOPIC, SAMPLES_TOPIC, SUMMARY_METADATA
+from core.recording import AxisTrace, Recording
 
 __all__ = ["load_recording", "load_mcap", "load_csv", "check_recording"]
 

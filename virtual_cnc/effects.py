@@ -8,7 +8,7 @@ Each effect is a frozen dataclass; :func:`parse_effect` reads the command-line f
 e.g. ``backlash=0.012``, ``resonance=freq_hz:40,damping:0.05``.  Every effect also takes
 ``axis:X`` to act on one axis only (default: all axes).
 
-How each is simulated (see :mod:`drivers.sim.servo`):
+How each is simulated (see :mod:`virtual_cnc.servo`):
 
 * ``backlash`` — the drive becomes two masses (motor with a fraction ``motor_fraction`` of
   the inertia, table with the rest) coupled through a dead zone of width ``gap_mm`` with a
@@ -42,7 +42,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import ClassVar, Union
 
-from agent.errors import InputError
+from core.errors import InputError
 
 __all__ = [
     "Backlash",

@@ -31,7 +31,7 @@ Machine file (TOML), keys (units in the names; every key optional unless marked)
 
     [axes.X]                           # one table per axis (required without base)
     controller = "ppi"                 # ppi | pid | smc
-    Kp = 30.0                          # gains in the units of drivers/sim/drive.py
+    Kp = 30.0                          # gains in the units of virtual_cnc/drive.py
     Ki = 50.9
     Kd = 0.3702
     Kv = 0.0
@@ -63,9 +63,9 @@ try:  # Python 3.11+
 except ModuleNotFoundError:  # pragma: no cover - 3.10
     import tomli as tomllib  # type: ignore[no-redef]
 
-from agent.errors import InputError, MachineError
-from drivers.sim.drive import AxisDrive, Controller, Encoder, Plant, smc_gains
-from drivers.sim.effects import Effect, format_effect, parse_effect
+from core.errors import InputError, MachineError
+from virtual_cnc.drive import AxisDrive, Controller, Encoder, Plant, smc_gains
+from virtual_cnc.effects import Effect, format_effect, parse_effect
 
 __all__ = [
     "Machine",

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["AxisTrace", "Recording"]
+__all__ = ["AxisTrace", "Recording", "Sample"]
 
 
 @dataclass(frozen=True)
@@ -101,3 +101,19 @@ class Recording:
             segment=self.segment[index],
             metadata=dict(self.metadata),
         )
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One controller sample tick, every axis.
+
+    ``counter`` is the controller's sample counter (monotonic, wraps handled by the
+    driver); ``t_s`` = counter x sample period, in s, controller clock.  Positions in
+    mm (deg for rotary axes), in the order of :attr:`StreamInfo.axes`.
+    """
+
+    counter: int
+    t_s: float
+    commanded: tuple[float, ...]
+    actual: tuple[float, ...]
+    segment: int = 0

@@ -6,7 +6,7 @@ Timing, per servo tick k (t_k = k·Ts):
    "actual" position returned and used by the position terms; the velocity/derivative
    terms use the backward difference of the motor encoder (the same encoder on a rigid
    axis) — a full-closed-loop axis, the usual CNC arrangement;
-2. the controller computes u_k (see :mod:`drivers.sim.drive` for the laws; reference
+2. the controller computes u_k (see :mod:`virtual_cnc.drive` for the laws; reference
    derivatives by central differences of x_r, which the interpolator knows ahead; the
    integrator is a rectangular sum with anti-windup while saturated);
 3. u_k is clipped to the actuator limit, quantised by the DAC and held (ZOH) over
@@ -48,9 +48,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numba import njit
 
-from agent.errors import InputError
-from drivers.sim.drive import AxisDrive
-from drivers.sim.effects import (
+from core.errors import InputError
+from virtual_cnc.drive import AxisDrive
+from virtual_cnc.effects import (
     Backlash,
     CyclicError,
     Effect,
@@ -61,7 +61,7 @@ from drivers.sim.effects import (
 )
 
 if TYPE_CHECKING:
-    from drivers.sim.presets import Machine
+    from virtual_cnc.presets import Machine
 
 __all__ = ["AxisResponse", "simulate_axis", "simulate_axis_response", "simulate_machine"]
 
@@ -375,7 +375,7 @@ def simulate_axis_response(
     ----------
     x_r : (N,) commanded position [mm] at t_k = k·Ts; the axis starts at rest at x_r[0].
     axis : controller, plant, encoder, period and substeps.
-    effects : extra physics (:mod:`drivers.sim.effects`), at most one of each kind; their
+    effects : extra physics (:mod:`virtual_cnc.effects`), at most one of each kind; their
         ``axis`` field is ignored here (see :func:`simulate_machine`).
     rng : source of the encoder noise; a fresh ``default_rng(0)`` when None.
     Ts : servo period [s]; defaults to ``axis.Ts``.
@@ -482,7 +482,7 @@ def simulate_machine(
     Parameters
     ----------
     commanded : {axis name: (N,) commanded position [mm] at machine.Ts}.
-    machine : a :class:`drivers.sim.presets.Machine`; its own ``effects`` apply first.
+    machine : a :class:`virtual_cnc.presets.Machine`; its own ``effects`` apply first.
     effects : extra effects; one with ``axis=None`` acts on every axis, otherwise on that axis.
     seed : seed of the encoder noise (reproducible); None for fresh entropy.  Each axis gets
         its own stream, independent of which other axes are simulated.

@@ -48,7 +48,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from agent.errors import MachineError
+from core.errors import MachineError
 
 __all__ = [
     "CONTROLLER_KINDS",

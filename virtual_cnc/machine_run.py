@@ -14,13 +14,13 @@ from typing import Sequence
 
 import numpy as np
 
-from agent.errors import InputError, MachineError
-from drivers.sim.effects import parse_effect
-from drivers.sim.presets import DEFAULT_MACHINE, Machine, load_machine
-from drivers.sim.servo import simulate_machine
+from core.errors import InputError, MachineError
+from virtual_cnc.effects import parse_effect
+from virtual_cnc.presets import DEFAULT_MACHINE, Machine, load_machine
+from virtual_cnc.servo import simulate_machine
 from gcode_gen.interpolator import interpolate
 from gcode_gen.interpreter import parse_program
-from ident.recording import AxisTrace, Recording
+from core.recording import AxisTrace, Recording
 
 __all__ = ["run_programs", "SETTLE_S"]
 

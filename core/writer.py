@@ -5,7 +5,7 @@ the file is flushed (the open chunk finished and written) at least every
 ``flush_interval_s`` seconds of host time, so a capture killed with SIGKILL loses at
 most that much; :meth:`McapRecorder.close` writes the summary metadata and the MCAP
 footer and is idempotent.  Timestamps are controller-clock nanoseconds (see
-:mod:`drivers.log_format`).
+:mod:`core.log_format`).
 """
 
 from __future__ import annotations
@@ -18,9 +18,8 @@ from typing import Any, Sequence
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from agent.errors import InputError
-from drivers.base import Sample
-from drivers.log_format import (
+from core.errors import InputError
+from core.log_format import (
     EVENT_SCHEMA,
     EVENT_SCHEMA_NAME,
     EVENTS_TOPIC,
@@ -30,7 +29,7 @@ from drivers.log_format import (
     SUMMARY_METADATA,
     sample_schema,
 )
-from ident.recording import Recording
+from core.recording import Recording, Sample
 
 __all__ = ["McapRecorder", "write_recording_mcap", "write_recording_csv"]
 

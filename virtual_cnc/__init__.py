@@ -1,0 +1,34 @@
+"""The virtual CNC's servo drives: controllers, drive physics, presets, the servo-loop simulator.
+
+Modules:
+
+* :mod:`virtual_cnc.drive` — controller/plant/encoder dataclasses, eq. 3.4/3.5 parameters;
+* :mod:`virtual_cnc.effects` — optional physics (SPEC §7) and the ``--effect`` parser;
+* :mod:`virtual_cnc.presets` — named machines (thesis §3.4.1) and TOML machine files;
+* :mod:`virtual_cnc.servo` — the numba servo loop: ``simulate_axis``, ``simulate_machine``.
+
+The servo module (and numba) is imported only when one of its names is first used.
+"""
+
+from __future__ import annotations
+
+from virtual_cnc.drive import AxisDrive, Controller, Encoder, Plant, closed_loop_parameters, smc_gains
+from virtual_cnc.effects import EFFECTS, Effect, format_effect, parse_effect
+from virtual_cnc.presets import DEFAULT_MACHINE, PRESETS, Machine, load_machine, machine_to_toml
+
+__all__ = [
+    "AxisDrive", "Controller", "Encoder", "Plant", "closed_loop_parameters", "smc_gains",
+    "EFFECTS", "Effect", "format_effect", "parse_effect",
+    "DEFAULT_MACHINE", "PRESETS", "Machine", "load_machine", "machine_to_toml",
+    "AxisResponse", "simulate_axis", "simulate_axis_response", "simulate_machine",
+]
+
+_SERVO_NAMES = {"AxisResponse", "simulate_axis", "simulate_axis_response", "simulate_machine"}
+
+
+def __getattr__(name: str):
+    if name in _SERVO_NAMES:
+        from virtual_cnc import servo
+
+        return getattr(servo, name)
+    raise AttributeError(f"module 'virtual_cnc' has no attribute {name!r}")
