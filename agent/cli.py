@@ -35,17 +35,56 @@ def _one_line_warnings(message, category, filename, lineno, file=None, line=None
     print(f"warning: {message}", file=sys.stderr)
 
 
+def _quiet_library_loggers() -> None:
+    """Keep third-party loggers (canopen, pymodbus, can) off the terminal.
+
+    Without a handler, Python's last-resort handler prints their warnings, so a failure
+    the library reports as one ``error:`` line would come with a second line from the
+    library below it.  ``RAPID_IDENT_DEBUG=1`` lets them through.
+    """
+    import logging
+
+    root = logging.getLogger()
+    if os.environ.get("RAPID_IDENT_DEBUG"):
+        logging.basicConfig(level=logging.DEBUG)
+    elif not root.handlers:
+        root.addHandler(logging.NullHandler())
+
+
+#: library argument (RapidIdentError.parameter) -> the option that sets it, where the
+#: option is not simply ``--`` + the argument with ``-`` for ``_``.
+FLAGS = {"options": "--opt", "programs": "PROGRAM", "out": "--out"}
+
+
+def error_line(exc: RapidIdentError) -> str:
+    """The one line a command prints for ``exc``: the library's message, with the option named.
+
+    A message about argument ``port`` becomes ``--port: <message>``; one that starts with
+    the argument's own name (``duration must be > 0 s``) has that name replaced by the
+    option (``--duration must be > 0 s``).
+    """
+    message = str(exc)
+    if not exc.parameter:
+        return message
+    flag = FLAGS.get(exc.parameter, "--" + exc.parameter.replace("_", "-"))
+    words = exc.parameter.replace("_", " ")
+    if message.startswith(words + " "):
+        return flag + message[len(words):]
+    return f"{flag}: {message}"
+
+
 def reports_errors(func: Callable) -> Callable:
     """Run a command, printing a RapidIdentError as one line instead of a traceback."""
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
         warnings.showwarning = _one_line_warnings
+        _quiet_library_loggers()
         warnings.simplefilter("always", RapidIdentWarning)
         try:
             return func(*args, **kwargs)
         except RapidIdentError as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            print(f"error: {error_line(exc)}", file=sys.stderr)
             raise typer.Exit(2 if isinstance(exc, InputError) else 1) from None
         except KeyboardInterrupt:
             print("interrupted", file=sys.stderr)

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from scipy.io import loadmat
 
-from virtual_cnc.machine_run import run_programs
+from virtual_cnc.machine_run import simulate as run_programs
 from gcode_gen import dialects
 from gcode_gen.excitation import identification_programs
 from core.recording import AxisTrace, Recording

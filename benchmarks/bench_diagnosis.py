@@ -5,7 +5,7 @@ A battery of cases, ``--cases-per-class`` (default 10) for each of the seven cla
 SPEC §7 (six effects and ``none``), with program seeds the tests do not use (10 000 +),
 a random controller preset (fadal-ppi / fadal-pid / fadal-smc) and a random magnitude in
 a realistic range per effect.  Each case: identification and validation recordings from
-``virtual_cnc.machine_run.run_programs`` of ``gcode_gen.excitation`` programs, the base
+``virtual_cnc.machine_run.simulate`` of ``gcode_gen.excitation`` programs, the base
 model identified as ``agent identify`` does (eq. 3.11, exact solver, output-error
 refinement), then :func:`ident.diagnosis.diagnose` scored on the validation recording
 (``--cv`` for two-fold cross-validation instead).

@@ -1,6 +1,6 @@
 """Wall time of `agent identify` on a 25 s, 1 kHz recording (issue 3: <= 2 s without the HTML report).
 
-Measured two ways in one run: the identification workflow in-process (after one warm-up,
+Measured two ways in one run: ``ident.identify`` in-process (after one warm-up,
 so numba's on-disk cache is loaded), and the whole command as a user runs it
 (`agent identify LOG --json OUT`, a fresh process: imports and cached JIT loading
 included), with and without the diagnosis.
@@ -16,20 +16,21 @@ import tempfile
 import time
 from pathlib import Path
 
+import ident
 from _recordings import preset_recording
-from agent.workflows.identify import IdentifyOptions, identify
 from core.writer import write_recording_mcap
 
 
 def main() -> None:
+    recording = preset_recording("fadal-pid")
     with tempfile.TemporaryDirectory() as tmp:
-        log = write_recording_mcap(preset_recording("fadal-pid"), Path(tmp) / "pid.mcap")
-        identify(log, options=IdentifyOptions(diagnose=False))  # warm-up: numba cache, imports
-        for label, opts in (("exact, no diagnosis", IdentifyOptions(diagnose=False)),
-                            ("ga 4000x500, no diagnosis", IdentifyOptions(solver="ga", diagnose=False)),
-                            ("exact + diagnosis", IdentifyOptions(diagnose=True))):
+        log = write_recording_mcap(recording, Path(tmp) / "pid.mcap")  # for the command-line runs
+        ident.identify(recording, diagnose=False)  # warm-up: numba cache, imports
+        for label, opts in (("exact, no diagnosis", dict(diagnose=False)),
+                            ("ga 4000x500, no diagnosis", dict(solver="ga", diagnose=False)),
+                            ("exact + diagnosis", dict(diagnose=True))):
             t0 = time.perf_counter()
-            res = identify(log, options=opts)
+            res = ident.identify(recording, **opts)
             wall = time.perf_counter() - t0
             r = res.axes["X"]
             stages = ", ".join(f"{k} {v:.2f}" for k, v in r.timings.items())

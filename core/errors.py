@@ -1,8 +1,11 @@
 """The project's exception hierarchy, one class per phase.
 
 Library code raises these with a one-line message that names the problem and the
-offending value; each ``agent`` command catches :class:`RapidIdentError` once,
-prints the message and exits non-zero.  Wrap third-party errors with
+offending value in the library's own terms (a function argument, a file, a URL) — never
+a command-line flag, since a library caller passed none.  An error about one argument
+says which with ``XError.about("port", "...")``; the ``agent`` CLI, which catches
+:class:`RapidIdentError` once per command, maps that argument to its flag (``--port``)
+when it prints the message, and exits non-zero.  Wrap third-party errors with
 ``raise XError("...") from exc`` so the cause stays chained for debugging.
 """
 
@@ -22,7 +25,21 @@ __all__ = [
 
 
 class RapidIdentError(Exception):
-    """Base class of every error the tool reports to the user."""
+    """Base class of every error the tool reports to the user.
+
+    ``parameter`` names the library argument the error is about (``"port"``,
+    ``"axes"``, ``"validate"`` ...), or is None; front ends use it to name their own
+    option for that argument.
+    """
+
+    parameter: str | None = None
+
+    @classmethod
+    def about(cls, parameter: str, message: str) -> "RapidIdentError":
+        """The error ``message`` concerning the argument ``parameter``."""
+        exc = cls(message)
+        exc.parameter = parameter
+        return exc
 
 
 class InputError(RapidIdentError, ValueError):

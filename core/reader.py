@@ -45,6 +45,7 @@ def load_recording(path: str | Path) -> Recording:
             head = fh.read(8)
         rec = load_mcap(path) if head.startswith(b"\x89MCAP") else load_csv(path)
     check_recording(rec, str(path))
+    rec.metadata["source"] = str(path)
     return rec
 
 

@@ -9,7 +9,7 @@ rotary axes) on the controller's own sample clock ``t`` in seconds.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -71,6 +71,54 @@ class Recording:
                 )
         if self.segment.shape != (n,):
             raise ValueError(f"segment has shape {self.segment.shape}, expected ({n},)")
+
+    @classmethod
+    def from_arrays(
+        cls,
+        t: Any,
+        commanded: Mapping[str, Any],
+        actual: Mapping[str, Any],
+        *,
+        segment: Any = None,
+        sample_period: float | None = None,
+        metadata: dict[str, Any] | None = None,
+    ) -> "Recording":
+        """A recording from arrays in memory, e.g. a controller scope export.
+
+        Parameters
+        ----------
+        t : array_like (N,)
+            Sample times, s, increasing.
+        commanded, actual : mapping axis name -> array_like (N,)
+            Commanded and actual position per axis, mm (deg for rotary axes); the same axes.
+        segment : array_like of int (N,), optional
+            Program/segment index per sample (default one segment).
+        sample_period : float, optional
+            Controller sample period, s; default the median step of ``t``.
+        metadata : dict, optional
+            Free-form description (``controller``, ``units`` ...).
+        """
+        from core.errors import RecordingError
+
+        t = np.asarray(t, dtype=float)
+        if t.ndim != 1 or t.size < 2:
+            raise RecordingError(f"t must be a 1-D array of at least 2 sample times, got shape {t.shape}")
+        if set(commanded) != set(actual):
+            raise RecordingError(f"commanded has axes {sorted(commanded)} but actual has {sorted(actual)}")
+        if sample_period is None:
+            sample_period = float(np.median(np.diff(t)))
+        if not sample_period > 0:
+            raise RecordingError(f"sample period must be > 0 s, got {sample_period}")
+        axes = {}
+        for name in commanded:
+            x_r = np.asarray(commanded[name], dtype=float)
+            x = np.asarray(actual[name], dtype=float)
+            if x_r.shape != t.shape or x.shape != t.shape:
+                raise RecordingError(f"axis {name}: commanded {x_r.shape} and actual {x.shape} must both "
+                                     f"have the shape of t {t.shape}")
+            axes[str(name).upper()] = AxisTrace(x_r, x)
+        return cls(t=t, axes=axes, sample_period=float(sample_period), segment=segment,
+                   metadata=dict(metadata or {}))
 
     @property
     def n_samples(self) -> int:

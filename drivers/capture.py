@@ -89,9 +89,9 @@ def select_axes(info: StreamInfo, wanted: list[str] | None) -> list[int]:
     out = []
     for a in wanted:
         if a not in info.axes:
-            raise InputError(f"--axes: the controller has no axis {a!r} (available: {', '.join(info.axes)})")
+            raise InputError.about("axes", f"the controller has no axis {a!r} (available: {', '.join(info.axes)})")
         if info.axes.index(a) in out:
-            raise InputError(f"--axes: axis {a!r} given twice")
+            raise InputError.about("axes", f"axis {a!r} given twice")
         out.append(info.axes.index(a))
     return out
 
@@ -203,7 +203,7 @@ def capture(
     the message in ``summary.error`` and a complete log.
     """
     if duration is not None and not duration > 0:
-        raise InputError(f"--duration must be > 0 s, got {duration}")
+        raise InputError.about("duration", f"duration must be > 0 s, got {duration}")
     out = Path(out)
     if out.suffix.lower() != ".mcap":
         raise InputError(f"-o {out}: a capture is written as MCAP; use a .mcap file name")

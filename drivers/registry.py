@@ -28,7 +28,7 @@ def driver_class(scheme: str) -> type[Driver]:
         module_name, class_name = DRIVERS[scheme]
     except KeyError:
         known = ", ".join(sorted(DRIVERS))
-        raise InputError(f"--port scheme {scheme!r} is not supported (known: {known})") from None
+        raise InputError.about("port", f"URL scheme {scheme!r} is not supported (known: {known})") from None
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:

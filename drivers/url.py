@@ -36,7 +36,7 @@ class PortURL:
         unknown = sorted(set(self.query) - set(allowed))
         if unknown:
             known = ", ".join(sorted(allowed)) or "none"
-            raise InputError(f"--port {self.raw}: unknown option {unknown[0]!r} (known: {known})")
+            raise InputError.about("port", f"{self.raw}: unknown option {unknown[0]!r} (known: {known})")
 
     def option(self, name: str, kind: type, default=None):
         """The query option ``name`` converted to ``kind``; a bad value is a one-line error."""
@@ -53,32 +53,32 @@ class PortURL:
                 raise ValueError(text)
             return kind(text)
         except ValueError:
-            raise InputError(
-                f"--port {self.raw}: option {name}={text!r} is not a valid {kind.__name__}"
+            raise InputError.about(
+                "port", f"{self.raw}: option {name}={text!r} is not a valid {kind.__name__}"
             ) from None
 
 
 def parse_port_url(text: str) -> PortURL:
-    """Split a ``--port`` value into scheme, host, port, path and query options."""
+    """Split a port URL (``agent capture --port``) into scheme, host, port, path and query options."""
     if not text or not text.strip():
-        raise InputError("--port is empty; give a URL such as modbus-tcp://127.0.0.1:5020")
+        raise InputError.about("port", "the port URL is empty; give a URL such as modbus-tcp://127.0.0.1:5020")
     text = text.strip()
     if text.startswith("/") or "://" not in text:
         if "://" not in text and not text.startswith("/"):
-            raise InputError(
-                f"--port {text!r}: not a URL; use scheme://..., e.g. serial:///dev/ttyUSB0 or modbus-tcp://127.0.0.1:5020"
+            raise InputError.about(
+                "port", f"{text!r}: not a URL; use scheme://..., e.g. serial:///dev/ttyUSB0 or modbus-tcp://127.0.0.1:5020"
             )
         return PortURL(scheme="serial", path=text, raw=text)
     parts = urlsplit(text)
     query: dict[str, str] = {}
     for key, value in parse_qsl(parts.query, keep_blank_values=True):
         if key in query:
-            raise InputError(f"--port {text}: option {key!r} given twice")
+            raise InputError.about("port", f"{text}: option {key!r} given twice")
         query[key] = value
     try:
         port = parts.port
     except ValueError:
-        raise InputError(f"--port {text}: the port number is not valid") from None
+        raise InputError.about("port", f"{text}: the port number is not valid") from None
     return PortURL(
         scheme=parts.scheme.lower(),
         host=parts.hostname or "",

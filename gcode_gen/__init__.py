@@ -9,7 +9,8 @@ Pipeline::
 Units: mm, mm/s, mm/s², s.  See the module docstrings for the thesis sections each follows.
 """
 
-from gcode_gen.dialects import DIALECTS, EXTENSIONS, file_name, write
+from gcode_gen.dialects import DIALECTS, EXTENSIONS, file_name, save, write
+from gcode_gen.generator import generate, save_programs
 from gcode_gen.excitation import ExcitationSpec, high_speed_program, identification_programs, low_speed_program
 from gcode_gen.interpolator import Trajectory, concatenate, interpolate, interpolate_programs, plan_profile
 from gcode_gen.interpreter import detect_dialect, parse_program, read_program
@@ -17,6 +18,7 @@ from gcode_gen.program import Block, Program, Toolpath
 from gcode_gen.toolpaths import TOOLPATHS, circle, diamond
 
 __all__ = [
+    "generate", "save_programs", "save",
     "Block", "Program", "Toolpath", "Trajectory",
     "ExcitationSpec", "identification_programs", "low_speed_program", "high_speed_program",
     "circle", "diamond", "TOOLPATHS",

@@ -265,5 +265,5 @@ def write_report(result: IdentifyResult, path: str | Path) -> Path:
     try:
         path.write_text(render_report(result), encoding="utf-8")
     except OSError as exc:
-        raise InputError(f"--report {path}: cannot write ({exc.strerror})") from None
+        raise InputError.about("report", f"{path}: cannot write ({exc.strerror})") from None
     return path

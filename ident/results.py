@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -52,6 +54,21 @@ class AxisResult:
     timings: dict[str, float] = field(default_factory=dict)
     traces: AxisTraces | None = None
     validation_traces: AxisTraces | None = None
+
+    def predict(self, x_r: np.ndarray, *, segment: np.ndarray | None = None,
+                x0: float | np.ndarray | None = None) -> np.ndarray:
+        """Free-run actual position (mm) the model predicts for the commanded ``x_r`` (mm).
+
+        Applies the identification's preview shift (``shift`` samples, §4.3.2) so the
+        prediction matches the fit figures; ``segment`` and ``x0`` as in
+        :func:`ident.simulation.simulate`.
+        """
+        from ident.preprocessing import shift_command
+        from ident.simulation import simulate
+
+        x_r = np.asarray(x_r, dtype=float)
+        return simulate(self.model, shift_command(x_r, self.shift, segment), self.sample_period,
+                        segment=segment, x0=x0)
 
     @property
     def active_constraints(self) -> tuple[str, ...]:
@@ -116,6 +133,12 @@ class ContourResult:
 
 @dataclass(frozen=True)
 class IdentifyResult:
+    """What :func:`ident.identify` found: one :class:`AxisResult` per axis, and the contour check.
+
+    ``to_json()`` is the SPEC §6 document ``agent identify --json`` writes;
+    ``report(path)`` writes the self-contained HTML report.
+    """
+
     source: str
     validation_source: str | None
     axes: dict[str, AxisResult]
@@ -132,6 +155,29 @@ class IdentifyResult:
             "elapsed_s": round(self.elapsed_s, 4),
             "recording": _jsonable(self.metadata),
         }
+
+    def to_json(self, indent: int | None = 2) -> str:
+        """The SPEC §6 JSON document (strict JSON: no NaN)."""
+        return json.dumps(self.to_dict(), indent=indent, allow_nan=False, default=_json_default)
+
+    def report(self, path: str | Path) -> Path:
+        """Write the self-contained HTML report to ``path``."""
+        from ident.report import write_report
+
+        return write_report(self, path)
+
+    @property
+    def models(self) -> dict[str, DriveModel]:
+        """The final drive model of each axis."""
+        return {name: r.model for name, r in self.axes.items()}
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
 def _jsonable(obj: Any) -> Any:

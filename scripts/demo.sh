@@ -22,7 +22,7 @@ $AGENT generate --axes X --dialect linuxcnc --seed 1 -o "$OUT"
 echo "== 2. serve them from a simulated $MACHINE controller over $TRANSPORT, in real time"
 : > "$OUT/serve.log"
 $AGENT serve --transport "$TRANSPORT" --machine "$MACHINE" \
-    --program "$OUT/ident_low.ngc" --program "$OUT/ident_high.ngc" > "$OUT/serve.log" 2>&1 &
+    "$OUT/ident_low.ngc" "$OUT/ident_high.ngc" > "$OUT/serve.log" 2>&1 &
 SERVE_PID=$!
 trap 'kill $SERVE_PID 2>/dev/null || true' EXIT
 for _ in $(seq 1 300); do

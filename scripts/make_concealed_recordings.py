@@ -2,7 +2,7 @@
 """Recordings from the virtual CNC with one concealed effect each — the proof of issue 5, item 5.
 
 Each case runs the identification programs (``gcode_gen.excitation``: a low-speed and a
-high-speed set) on the virtual CNC (``virtual_cnc.machine_run.run_programs``) with one
+high-speed set) on the virtual CNC (``virtual_cnc.machine_run.simulate``) with one
 effect of SPEC §7 added (or none), then a *validation* recording: the same kind of program
 with a different seed.  Magnitudes are chosen so the base model of eq. 3.3 identified from
 the recording still fits (tracking-error fit ≥ 60 %) and nothing shows by eye in the
@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from virtual_cnc.machine_run import run_programs  # noqa: E402
+from virtual_cnc.machine_run import simulate as run_programs  # noqa: E402
 from gcode_gen.dialects import file_name, write  # noqa: E402
 from gcode_gen.excitation import identification_programs  # noqa: E402
 

@@ -34,7 +34,7 @@ import numpy as np
 import pytest
 
 from core.writer import write_recording_mcap
-from virtual_cnc.machine_run import run_programs
+from virtual_cnc.machine_run import simulate as run_programs
 from core.reader import load_recording
 from core.recording import Recording
 
@@ -148,7 +148,7 @@ def served_source(source: str, program: Path, simulated: Recording, cwd: Path) -
     """`agent serve` arguments for "program" (run live) or "recording" (replay of its simulated log,
     written as `agent simulate` writes it)."""
     if source == "program":
-        return ["-p", str(program)]
+        return [str(program)]
     write_recording_mcap(simulated, cwd / "sim.mcap")
     return ["--recording", str(cwd / "sim.mcap")]
 
@@ -257,7 +257,7 @@ def assert_sigkill_loses_at_most_one_second(transport: str, cwd: Path, wire: Wir
     prog = write_program(cwd / "long.nc", ["X20", "X0", "X10"], feed_mm_min=900)  # ~3.4 s
     sim = run_programs([prog])
     out = cwd / LOG
-    with Server(["-t", transport, "-p", str(prog), "--fault-log", "faults.json", "--linger", "0"], cwd) as srv:
+    with Server(["-t", transport, str(prog), "--fault-log", "faults.json", "--linger", "0"], cwd) as srv:
         cap = start_capture(["--port", srv.port, "-o", LOG], cwd)
         wait_for_size(out, 20_000)  # until well over half a second of samples is on disk
         time.sleep(1.2)

@@ -316,7 +316,7 @@ def test_slcan_adapter_over_a_pseudo_terminal():
     ({"protocol": "j1939"}, r"protocol='j1939' \(use canopen or dbc\)"),
     ({"nodes": "1,2,3"}, r"need 2 node ids in 1..127 \(one per axis\), got \[1, 2, 3\]"),
     ({"status": 2}, r"status node 2 must be 0..127 and not an axis node"),
-    ({"scale": 1e12}, r"does not fit INTEGER32 at 1e\+12 increments per mm; lower --opt scale="),
+    ({"scale": 1e12}, r"does not fit INTEGER32 at 1e\+12 increments per mm; lower the scale option"),
     ({"bogus": 1}, r"unknown option 'bogus'"),
 ])
 def test_bad_endpoint_options_are_one_line_errors(options, message):

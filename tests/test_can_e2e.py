@@ -14,7 +14,7 @@ from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, assert_complete_and_exa
                             assert_recorded_all_but, assert_rejected_frames_are_dropped,
                             assert_sigkill_loses_at_most_one_second, reconnected_log, serve_and_capture, served_source)
 from _capture_procs import program, simulated  # noqa: F401  (module-scoped fixtures, requested by name)
-from virtual_cnc.machine_run import run_programs
+from virtual_cnc.machine_run import simulate as run_programs
 
 pytestmark = [pytest.mark.slow, pytest.mark.skipif(not udp_multicast_available(), reason=UDP_MULTICAST_NEEDS)]
 
@@ -31,7 +31,7 @@ def test_capture_equals_the_simulation_exactly_with_zero_drops(tmp_path, program
 
 def test_injected_drops_and_corruptions_are_counted_exactly_and_never_recorded(tmp_path, program):
     simulated = run_programs([program], seed=FAULT_SEED)
-    _, res = serve_and_capture(["-t", "can", "-p", str(program), "--speed", "2", *INJECTED_FAULTS], tmp_path,
+    _, res = serve_and_capture(["-t", "can", str(program), "--speed", "2", *INJECTED_FAULTS], tmp_path,
                                wait=True)
     # a corrupted tick is a TPDO of 6 bytes where the mapping says 8: rejected, so also dropped
     assert_rejected_frames_are_dropped(res, tmp_path, simulated)
@@ -39,7 +39,7 @@ def test_injected_drops_and_corruptions_are_counted_exactly_and_never_recorded(t
 
 def test_a_silent_bus_longer_than_a_sync_counter_wrap_is_bridged_and_counted(tmp_path, program, simulated):
     # 0.5 s of silence at 1 kHz = 500 ticks: more than the 240 values of the SYNC counter
-    _, res = serve_and_capture(["-t", "can", "-p", str(program), "--disconnect-at", "0.6", "--opt", "outage=0.5",
+    _, res = serve_and_capture(["-t", "can", str(program), "--disconnect-at", "0.6", "--opt", "outage=0.5",
                                 "--fault-log", "faults.json"], tmp_path, wait=True)
     log, faults = reconnected_log(res, tmp_path)
     unsent = faults["unsent_counters"]
@@ -49,7 +49,7 @@ def test_a_silent_bus_longer_than_a_sync_counter_wrap_is_bridged_and_counted(tmp
 
 
 def test_a_bus_that_stays_silent_ends_the_capture_with_one_line_and_a_complete_log(tmp_path, program):
-    _, res = serve_and_capture(["-t", "can", "-p", str(program), "--disconnect-at", "0.5", "--opt", "outage=5"],
+    _, res = serve_and_capture(["-t", "can", str(program), "--disconnect-at", "0.5", "--opt", "outage=5"],
                                tmp_path, port_query="&timeout=0.5")
     err, log = assert_failed_with_one_line(res.returncode, res.stderr, tmp_path)
     assert "no CAN frame for 0." in err, res.stderr

@@ -3,36 +3,24 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-from agent.workflows.identify import IdentifyOptions, identify
-from core.writer import write_recording_mcap
-from virtual_cnc.machine_run import run_programs
-from gcode_gen import dialects
-from gcode_gen.excitation import identification_programs
-
-
-def _programs(tmp: Path, seed: int) -> list[Path]:
-    directory = tmp / f"seed{seed}"
-    directory.mkdir()
-    return [dialects.save(tp, "linuxcnc", directory) for tp in identification_programs(axes=("X",), seed=seed)]
+import gcode_gen
+import ident
+import virtual_cnc
 
 
 @pytest.fixture(scope="module")
-def programs(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("programs")
-    return {"ident": _programs(tmp, 1), "valid": _programs(tmp, 2), "dir": tmp}
+def programs():
+    return {"ident": gcode_gen.generate(["X"], seed=1), "valid": gcode_gen.generate(["X"], seed=2)}
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("machine, min_fit", [("fadal-ppi", 95.0), ("fadal-pid", 95.0), ("fadal-smc", 90.0)])
 def test_validation_fit_on_thesis_presets(programs, machine, min_fit):
-    tmp = programs["dir"]
-    ident_log = write_recording_mcap(run_programs(programs["ident"], machine, seed=1), tmp / f"{machine}_id.mcap")
-    valid_log = write_recording_mcap(run_programs(programs["valid"], machine, seed=2), tmp / f"{machine}_va.mcap")
-    result = identify(ident_log, validate=valid_log, options=IdentifyOptions(diagnose=False))
+    recording = virtual_cnc.simulate(programs["ident"], machine, seed=1)
+    validation = virtual_cnc.simulate(programs["valid"], machine, seed=2)
+    result = ident.identify(recording, validate=validation, diagnose=False)
     r = result.axes["X"]
     assert r.fit_validation.tracking_error_fit_pct >= min_fit
     assert r.fit_identification.tracking_error_fit_pct >= min_fit

@@ -19,7 +19,7 @@ from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, LOG, Server, assert_com
                             assert_sigkill_loses_at_most_one_second, assert_values_exact, injected_faults,
                             read_fault_log, serve_and_capture, start_capture, wait_for_size)
 from _capture_procs import program, simulated  # noqa: F401  (module-scoped fixtures, requested by name)
-from virtual_cnc.machine_run import run_programs
+from virtual_cnc.machine_run import simulate as run_programs
 from core.reader import load_recording
 
 pytestmark = pytest.mark.slow
@@ -33,7 +33,7 @@ def wire(values: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("link", ["tcp", "rtu"])
 def test_trace_capture_equals_the_simulation_exactly_with_zero_drops(tmp_path, program, simulated, link):
-    port, res = serve_and_capture(["-t", "modbus", "-p", str(program), "--speed", "2", "--opt", f"link={link}",
+    port, res = serve_and_capture(["-t", "modbus", str(program), "--speed", "2", "--opt", f"link={link}",
                                    "--fault-log", "faults.json"], tmp_path, wait=True)
     assert port.startswith(f"modbus-{link}://") and "mode=trace" in port
     log = assert_complete_and_exact(res, tmp_path, simulated, wire)
@@ -47,7 +47,7 @@ def test_trace_capture_equals_the_simulation_exactly_with_zero_drops(tmp_path, p
 @pytest.mark.parametrize("link", ["tcp", "rtu"])
 def test_injected_drops_and_corruptions_are_counted_exactly_and_never_recorded(tmp_path, program, link):
     simulated = run_programs([program], seed=FAULT_SEED)
-    _, res = serve_and_capture(["-t", "modbus", "-p", str(program), "--speed", "2", "--opt", f"link={link}",
+    _, res = serve_and_capture(["-t", "modbus", str(program), "--speed", "2", "--opt", f"link={link}",
                                 *INJECTED_FAULTS], tmp_path, wait=True)
     assert res.returncode == 0, res.stderr
     faults = injected_faults(tmp_path)
@@ -64,7 +64,7 @@ def test_injected_drops_and_corruptions_are_counted_exactly_and_never_recorded(t
 
 
 def test_a_tcp_disconnect_is_survived_and_the_ring_refills_the_gap(tmp_path, program, simulated):
-    _, res = serve_and_capture(["-t", "modbus", "-p", str(program), "--speed", "2", "--disconnect-at", "0.8",
+    _, res = serve_and_capture(["-t", "modbus", str(program), "--speed", "2", "--disconnect-at", "0.8",
                                 "--fault-log", "faults.json"], tmp_path, wait=True)
     assert res.returncode == 0, res.stderr
     assert read_fault_log(tmp_path / "faults.json")["disconnects"] == 1
@@ -76,7 +76,7 @@ def test_a_tcp_disconnect_is_survived_and_the_ring_refills_the_gap(tmp_path, pro
 
 
 def test_live_polling_records_exact_values_and_counts_the_ticks_it_did_not_see(tmp_path, program, simulated):
-    port, res = serve_and_capture(["-t", "modbus", "-p", str(program), "--opt", "mode=live"], tmp_path)
+    port, res = serve_and_capture(["-t", "modbus", str(program), "--opt", "mode=live"], tmp_path)
     assert "mode=live" in port
     assert res.returncode == 0, res.stderr
     log = load_recording(tmp_path / LOG)
@@ -88,7 +88,7 @@ def test_live_polling_records_exact_values_and_counts_the_ticks_it_did_not_see(t
 
 
 def test_a_controller_gone_for_good_ends_with_one_line_and_a_complete_log(tmp_path, program, simulated):
-    with Server(["-t", "modbus", "-p", str(program)], tmp_path) as srv:
+    with Server(["-t", "modbus", str(program)], tmp_path) as srv:
         cap = start_capture(["--port", srv.port + "&reconnect_s=0.5", "-o", LOG], tmp_path)
         wait_for_size(tmp_path / LOG, 5_000)
         srv.proc.kill()  # the controller is switched off: no listener to reconnect to

@@ -13,7 +13,7 @@ from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, assert_complete_and_exa
                             assert_recorded_all_but, assert_rejected_frames_are_dropped,
                             assert_sigkill_loses_at_most_one_second, reconnected_log, serve_and_capture, served_source)
 from _capture_procs import program, simulated  # noqa: F401  (module-scoped fixtures, requested by name)
-from virtual_cnc.machine_run import run_programs
+from virtual_cnc.machine_run import simulate as run_programs
 
 pytestmark = pytest.mark.slow
 
@@ -33,7 +33,7 @@ def test_capture_equals_the_simulation_exactly_with_zero_drops(tmp_path, program
 @pytest.mark.parametrize("fmt", ["binary", "ascii"])
 def test_injected_drops_and_corruptions_are_counted_exactly_and_never_recorded(tmp_path, program, fmt):
     simulated = run_programs([program], seed=FAULT_SEED)
-    _, res = serve_and_capture(["-t", "serial", "-p", str(program), "--speed", "2", "--opt", f"format={fmt}",
+    _, res = serve_and_capture(["-t", "serial", str(program), "--speed", "2", "--opt", f"format={fmt}",
                                 *INJECTED_FAULTS], tmp_path, wait=True)
     log = assert_rejected_frames_are_dropped(res, tmp_path, simulated)
     gaps = sum(e["count"] for e in log.metadata["events"] if e["kind"] == "dropped")
@@ -41,7 +41,7 @@ def test_injected_drops_and_corruptions_are_counted_exactly_and_never_recorded(t
 
 
 def test_a_disconnect_is_survived_by_reconnecting_and_the_gap_is_counted(tmp_path, program, simulated):
-    _, res = serve_and_capture(["-t", "serial", "-p", str(program), "--disconnect-at", "0.6", "--drop-rate", "0.01",
+    _, res = serve_and_capture(["-t", "serial", str(program), "--disconnect-at", "0.6", "--drop-rate", "0.01",
                                 "--fault-log", "faults.json"], tmp_path, wait=True)
     log, faults = reconnected_log(res, tmp_path)
     unsent = faults["unsent_counters"]
@@ -53,7 +53,7 @@ def test_a_disconnect_is_survived_by_reconnecting_and_the_gap_is_counted(tmp_pat
 
 
 def test_a_disconnect_without_reconnection_ends_with_one_line_and_a_complete_log(tmp_path, program):
-    _, res = serve_and_capture(["-t", "serial", "-p", str(program), "--disconnect-at", "0.5", "--opt", "outage=3"],
+    _, res = serve_and_capture(["-t", "serial", str(program), "--disconnect-at", "0.5", "--opt", "outage=3"],
                                tmp_path, port_query="&reconnect=0.5")
     err, log = assert_failed_with_one_line(res.returncode, res.stderr, tmp_path)
     assert "disconnected" in err and "did not come back within 0.5 s" in err, res.stderr

@@ -17,15 +17,28 @@ import numpy as np
 from core.errors import InputError, MachineError
 from virtual_cnc.effects import parse_effect
 from virtual_cnc.presets import DEFAULT_MACHINE, Machine, load_machine
-from virtual_cnc.servo import simulate_machine
+from gcode_gen.dialects import write
 from gcode_gen.interpolator import interpolate
 from gcode_gen.interpreter import parse_program
+from gcode_gen.program import Program, Toolpath
 from core.recording import AxisTrace, Recording
 
-__all__ = ["run_programs", "SETTLE_S"]
+__all__ = ["simulate", "SETTLE_S"]
 
 #: Commanded position held after each program so the drive settles before the next one (s).
 SETTLE_S = 0.2
+
+
+def _program(item: "str | Path | Program | Toolpath") -> tuple[str, str, Program]:
+    """(name, text, parsed program) of a program file, a parsed Program or a generated Toolpath."""
+    if isinstance(item, Toolpath):
+        text = write(item, "linuxcnc")
+        return item.name, text, parse_program(text, name=item.name)
+    if isinstance(item, Program):
+        return item.name, item.text, item
+    path = Path(item)
+    text, program = _read_program(path)
+    return path.name, text, program
 
 
 def _read_program(path: Path):
@@ -38,7 +51,7 @@ def _read_program(path: Path):
     return text, parse_program(text, name=path.name)
 
 
-def run_programs(
+def simulate(
     programs: Sequence[str | Path],
     machine: str | Path | Machine | None = None,
     effects: Sequence[str] = (),
@@ -48,7 +61,8 @@ def run_programs(
 
     Parameters
     ----------
-    programs : G-code files (iso, heidenhain or linuxcnc dialect), run in order.
+    programs : G-code files (iso, heidenhain or linuxcnc dialect), parsed
+        :class:`gcode_gen.Program` s or generated :class:`gcode_gen.Toolpath` s, run in order.
     machine : preset name, TOML machine file, or a Machine; default :data:`DEFAULT_MACHINE`.
     effects : ``NAME=VALUE`` strings of SPEC §7 physics added to every axis.
     seed : seed of the encoder noise.
@@ -64,14 +78,13 @@ def run_programs(
     info = []
     moved: set[str] = set()
     for index, p in enumerate(programs):
-        path = Path(p)
-        text, program = _read_program(path)
-        info.append({"name": path.name, "sha256": hashlib.sha256(text.encode()).hexdigest()})
+        name, text, program = _program(p)
+        info.append({"name": name, "sha256": hashlib.sha256(text.encode()).hexdigest()})
         for block in program.blocks:
             unknown = set(block.target) - set(mach.axes)
             if unknown:
                 raise MachineError(
-                    f"{path.name}:{block.line}: moves axis {sorted(unknown)[0]}, "
+                    f"{name}:{block.line}: moves axis {sorted(unknown)[0]}, "
                     f"machine {mach.name} has axes {', '.join(mach.axes)}"
                 )
             moved |= set(block.target)
@@ -90,6 +103,8 @@ def run_programs(
     axes = [a for a in mach.axes if a in moved]
     commanded = {a: np.concatenate([part[a] for part in parts]) for a in axes}
     segment = np.concatenate(segments)
+    from virtual_cnc.servo import simulate_machine  # numba: imported when a simulation runs
+
     actual = simulate_machine(commanded, mach, fx, seed=seed)
     n = segment.size
     return Recording(

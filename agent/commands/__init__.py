@@ -5,7 +5,7 @@ from __future__ import annotations
 import importlib
 from typing import Callable
 
-#: command name -> (module, function); a missing module (not written yet) is skipped.
+#: command name -> (module, function)
 COMMANDS: dict[str, tuple[str, str]] = {
     "generate": ("agent.commands.generate", "generate"),
     "simulate": ("agent.commands.simulate", "simulate"),
@@ -16,13 +16,5 @@ COMMANDS: dict[str, tuple[str, str]] = {
 
 
 def registered_commands() -> list[tuple[str, Callable]]:
-    out = []
-    for name, (module_name, func_name) in COMMANDS.items():
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name == module_name:
-                continue
-            raise
-        out.append((name, getattr(module, func_name)))
-    return out
+    """(name, function) of every command; a module that fails to import is an error, never skipped."""
+    return [(name, getattr(importlib.import_module(module), func)) for name, (module, func) in COMMANDS.items()]

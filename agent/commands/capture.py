@@ -11,12 +11,15 @@ import typer
 
 def capture(
     port: str = typer.Option(..., "--port", help="controller URL, e.g. serial:///dev/ttyUSB0?format=binary"),
-    output: Path = typer.Option(..., "--output", "-o", help="MCAP log to write"),
+    output: Path = typer.Option(..., "--out", "-o", help="MCAP log to write"),
     axes: Optional[str] = typer.Option(None, "--axes", help="comma-separated axes to record (default: all)"),
     duration: Optional[float] = typer.Option(None, "--duration", help="stop after this much controller time, s"),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="no live progress line"),
 ) -> None:
-    """Record a controller's commanded and actual positions until the program ends, --duration, or Ctrl-C."""
+    """Record a controller's commanded and actual positions until the program ends, --duration, or Ctrl-C.
+
+    Example: agent capture --port serial:///dev/ttyUSB0?baud=921600 -o run.mcap
+    """
     from core.errors import TransportError
     from drivers.capture import capture as run_capture
 

@@ -10,16 +10,12 @@ contour instead (:mod:`gcode_gen.toolpaths`).  The extension follows the dialect
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 from pathlib import Path
 from typing import Optional
 
 import typer
 
 from core.errors import InputError
-from gcode_gen import dialects
-from gcode_gen.excitation import identification_programs
-from gcode_gen.toolpaths import TOOLPATHS
 
 
 def _floats(text: str, option: str) -> list[float]:
@@ -55,36 +51,20 @@ def generate(
     blending: bool = typer.Option(False, "--blending", help="Write path blending (G64 P0.01) instead of exact stop (G61; G61.1 in LinuxCNC)."),
     out: Path = typer.Option(Path("."), "-o", "--out", help="Output directory (created if missing)."),
 ) -> None:
-    """Write identification programs (low- and high-speed sets) or a validation contour."""
-    dialect = dialect.strip().lower()
-    if dialect not in dialects.DIALECTS:
-        raise InputError(f"unknown dialect {dialect!r} (use one of {', '.join(dialects.DIALECTS)})")
+    """Write identification programs (low- and high-speed sets) or a validation contour.
+
+    Example: agent generate --axes X --dialect linuxcnc -o prog/
+    """
+    from gcode_gen.generator import generate as make_programs
+    from gcode_gen.generator import save_programs
+
     if not math.isfinite(feed) or feed <= 0:
         raise InputError(f"--feed must be a positive number of mm/s, got {feed}")
-    centers = _floats(center, "--center")
-    if toolpath is not None:
-        kind = toolpath.strip().lower()
-        if kind not in TOOLPATHS:
-            raise InputError(f"unknown toolpath {toolpath!r} (use circle or diamond)")
-        ax = _axes(axes or "X,Y")
-        if len(centers) == 1:
-            centers = centers * 2
-        programs = [TOOLPATHS[kind](size=size, feed=feed, center=centers, axes=ax)]
-    else:
-        ax = _axes(axes or "X")
-        if len(centers) not in (1, len(ax)):
-            raise InputError(f"--center has {len(centers)} values for {len(ax)} axes")
-        programs = list(identification_programs(
-            axes=ax, center=centers, range_mm=range_mm, low_step=low_step,
-            n_low=n_low, n_high=n_high, feed=feed, seed=seed, distribution=distribution,
-        ))
-    if blending:
-        programs = [replace(tp, blending=True) for tp in programs]
-    if out.exists() and not out.is_dir():
-        raise InputError(f"output {out} exists and is not a directory")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        for tp in programs:
-            print(dialects.save(tp, dialect, out))
-    except OSError as exc:
-        raise InputError(f"cannot write to {out}: {exc.strerror or exc}") from exc
+    default_axes = "X,Y" if toolpath is not None else "X"
+    programs = make_programs(
+        _axes(axes or default_axes), center=_floats(center, "--center"), range_mm=range_mm,
+        low_step=low_step, n_low=n_low, n_high=n_high, feed=feed, seed=seed, distribution=distribution,
+        toolpath=toolpath, size=size, blending=blending,
+    )
+    for path in save_programs(programs, dialect, out):
+        print(path)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import List, Optional
 
@@ -13,7 +12,7 @@ from core.errors import InputError
 
 def identify(
     log: Path = typer.Argument(..., help="Recording to identify from (.mcap or .csv)."),
-    axis: List[str] = typer.Option([], "--axis", help="Axis to identify (repeatable or comma list); default all."),
+    axis: List[str] = typer.Option([], "--axes", "--axis", help="Axes to identify (comma list, repeatable); default all."),
     solver: str = typer.Option("exact", "--solver", help="exact (certified constrained optimum), ga (thesis §4.2) or ls."),
     validate: Optional[Path] = typer.Option(None, "--validate", help="Score the model on this other recording."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the SPEC §6 JSON result here."),
@@ -31,43 +30,26 @@ def identify(
     ga_population: int = typer.Option(4000, "--ga-population", help="GA population size (thesis: 4000)."),
     ga_generations: int = typer.Option(500, "--ga-generations", help="GA generations (thesis: 500)."),
 ) -> None:
-    """Identify the closed-loop drive model of each axis in LOG and print the result."""
+    """Identify the closed-loop drive model of each axis in LOG and print the result.
+
+    Example: agent identify run.mcap --validate other.mcap --json result.json --report report.html
+    """
     from agent.summary import print_summary
-    from agent.workflows.identify import IdentifyOptions, identify as run
+    from agent.workflows.identify import identify_files
     from ident.model import Bounds
 
-    if solver not in ("exact", "ga", "ls"):
-        raise InputError(f"--solver {solver!r}: choose exact, ga or ls")
-    if ga_population < 10 or ga_generations < 1:
-        raise InputError("--ga-population must be >= 10 and --ga-generations >= 1")
     for path, flag, suffix in ((json_out, "--json", ".json"), (report, "--report", ".html")):
         if path is not None and path.suffix.lower() != suffix:
             raise InputError(f"{flag} {path}: expected a {suffix} file")
     axes = [a for item in axis for a in item.split(",") if a.strip()]
-    opts = IdentifyOptions(
-        axes=axes or None, solver=solver,
+    result = identify_files(
+        log, validate=validate, against=against, model=model, json_out=json_out, report=report,
+        axes=axes or None, solver=solver, diagnose=diagnose, refine=refine, seed=seed,
         bounds=Bounds(p_min_hz=p_min_hz, wn_min_hz=wn_min_hz, zeta_min=zeta_min, zeta_max=zeta_max,
                       f_max_hz=f_max_hz),
-        refine=refine, diagnose=diagnose, seed=seed,
-        ga_population=ga_population, ga_generations=ga_generations, model_json=model,
+        ga_population=ga_population, ga_generations=ga_generations,
     )
-    result = run(log, validate=validate, against=against, options=opts)
     print_summary(result)
-    if json_out is not None:
-        json_out.write_text(json.dumps(result.to_dict(), indent=2, allow_nan=False, default=_default))
-        typer.echo(f"wrote {json_out}")
-    if report is not None:
-        from ident.report import write_report
-
-        write_report(result, report)
-        typer.echo(f"wrote {report}")
-
-
-def _default(obj):
-    import numpy as np
-
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
+    for path in (json_out, report):
+        if path is not None:
+            typer.echo(f"wrote {path}")

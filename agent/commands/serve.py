@@ -11,11 +11,11 @@ from drivers.endpoints.source import FaultPlan
 
 
 def serve(
+    programs: List[Path] = typer.Argument(None, help="G-code programs, run in order as separate segments."),
     transport: str = typer.Option(..., "--transport", "-t", help="serial | modbus | can"),
-    program: List[Path] = typer.Option([], "--program", "-p", help="G-code program(s) to run, in order"),
     recording: Optional[Path] = typer.Option(None, "--recording",
                                              help="serve an existing log (.mcap/.csv) instead of running programs"),
-    machine: Optional[str] = typer.Option(None, "--machine", "-m", help="machine preset name or TOML file"),
+    machine: Optional[str] = typer.Option(None, "--machine", help="Machine preset name or TOML machine file (default: fadal-ppi)."),
     effect: List[str] = typer.Option([], "--effect", help="extra physics NAME=VALUE (repeatable)"),
     seed: int = typer.Option(0, "--seed", help="seed of the simulation noise and of the fault plan"),
     speed: float = typer.Option(1.0, "--speed", help="1 = real time, 2 = twice as fast"),
@@ -28,9 +28,11 @@ def serve(
                                            help="keep serving the end marker this long after the program, s"),
     opt: List[str] = typer.Option([], "--opt", help="transport option NAME=VALUE, e.g. format=ascii (repeatable)"),
 ) -> None:
-    """Serve commanded/actual positions of a virtual CNC run over serial, Modbus or CAN.
+    """Serve commanded/actual positions of a virtual CNC run of PROGRAMS over serial, Modbus or CAN.
 
     Prints `port: <URL>` first; pass that URL to `agent capture --port`.
+
+    Example: agent serve prog/ident_low.ngc prog/ident_high.ngc --transport serial
     """
     from drivers.endpoints.serve import build_recording, endpoint_class, serve as run_serve
     from drivers.endpoints.base import parse_endpoint_options
@@ -38,6 +40,6 @@ def serve(
     options = parse_endpoint_options(endpoint_class(transport), list(opt))
     if linger is not None:
         options["linger"] = linger
-    rec = build_recording(program, machine, effect, seed, recording)
+    rec = build_recording(programs or [], machine, effect, seed, recording)
     faults = FaultPlan(drop_rate=drop_rate, corrupt_rate=corrupt_rate, disconnect_at_s=disconnect_at, seed=seed)
     run_serve(transport, rec, speed=speed, faults=faults, options=options, fault_log=fault_log)

@@ -20,9 +20,12 @@ def simulate(
     seed: int = typer.Option(0, "--seed", help="Seed of the encoder noise."),
     csv: Optional[Path] = typer.Option(None, "--csv", help="Also write the SPEC §4 CSV to this file."),
 ) -> None:
-    """Run PROGRAMs on the virtual CNC and write a recording in exactly the format a capture writes."""
+    """Run PROGRAMs on the virtual CNC and write a recording in exactly the format a capture writes.
+
+    Example: agent simulate prog/ident_low.ngc prog/ident_high.ngc --machine fadal-pid -o run.mcap
+    """
     from core.writer import write_recording_csv, write_recording_mcap
-    from virtual_cnc.machine_run import run_programs
+    from virtual_cnc import simulate as run_programs
 
     if out.suffix.lower() != ".mcap":
         raise InputError(f"-o {out}: the log must be a .mcap file (use --csv for CSV)")

@@ -1,247 +1,38 @@
-"""The identification workflow behind ``agent identify``.
-
-recording → preprocessing (sampling, gaps, plausibility) → regression (eq. 3.11, with
-the preview shift) → constrained solver (exact / ga / ls) → output-error refinement →
-free-run fits on identification and validation data → diagnosis → IdentifyResult.
-Each stage is a function of ident/; this module only joins them and times them.
-"""
+"""``agent identify`` as a workflow of files: load the recordings, :func:`ident.identify`, write the outputs."""
 
 from __future__ import annotations
 
-import json
-import time
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
 
-import numpy as np
-
-from core.errors import IdentificationError, InputError, RecordingError
-from ident.contour import contour_error
 from core.reader import load_recording
-from ident.metrics import FitResult, fit_result
-from ident.model import TWO_PI, Bounds, DriveModel
-from ident.preprocessing import prepare_recording, shift_command
-from core.recording import Recording
-from ident.refine import refine as refine_model
-from ident.regression import build_regression
-from ident.results import AxisResult, AxisTraces, ContourResult, IdentifyResult
-from ident.simulation import simulate
-from ident.solvers import solve, solve_ls
+from ident.pipeline import identify as identify_recording
+from ident.pipeline import load_models
+from ident.results import IdentifyResult
 
-__all__ = ["IdentifyOptions", "identify"]
+__all__ = ["identify_files"]
 
 
-@dataclass(frozen=True)
-class IdentifyOptions:
-    axes: Sequence[str] | None = None
-    solver: str = "exact"
-    bounds: Bounds = Bounds()
-    refine: bool = True
-    diagnose: bool = True
-    seed: int = 0
-    ga_population: int = 4000
-    ga_generations: int = 500
-    model_json: Path | None = None  # compare against an earlier model instead of identifying
+def identify_files(path: Path, *, validate: Path | None = None, against: Path | None = None,
+                   model: Path | None = None, json_out: Path | None = None, report: Path | None = None,
+                   **options) -> IdentifyResult:
+    """Identify the recording at ``path``; write ``json_out`` and ``report`` when given.
 
-
-def _load(path: Path) -> Recording:
-    return prepare_recording(load_recording(path))
-
-
-def _pick_axes(rec: Recording, wanted: Sequence[str] | None, path: Path) -> list[str]:
-    if not wanted:
-        return rec.axis_names
-    out = []
-    for a in wanted:
-        a = a.strip().upper()
-        if a not in rec.axes:
-            raise InputError(f"axis {a} is not in {path} (it has {', '.join(rec.axis_names)})")
-        out.append(a)
-    return out
-
-
-def _free_run(model: DriveModel, rec: Recording, axis: str, shift: int) -> np.ndarray:
-    tr = rec.axes[axis]
-    return simulate(model, shift_command(tr.commanded, shift, rec.segment), rec.sample_period,
-                    segment=rec.segment, x0=tr.actual)
-
-
-def _fit_or_none(model: DriveModel, rec: Recording, axis: str, shift: int) -> FitResult | None:
-    with np.errstate(all="ignore"):
-        try:
-            x_hat = _free_run(model, rec, axis, shift)
-        except (FloatingPointError, ValueError, OverflowError):
-            return None
-    if not np.all(np.isfinite(x_hat)):
-        return None
-    tr = rec.axes[axis]
-    return fit_result(tr.commanded - tr.actual, tr.commanded - x_hat)
-
-
-def _ls_note(ls_model: DriveModel, bounds: Bounds, Ts: float, fit_ls: FitResult | None,
-             fit_final: FitResult, duration_s: float) -> str:
-    violated = bounds.check(ls_model, Ts)
-    poles = ", ".join(f"{f:.2f} Hz/ζ {d:.2f}" for f, d in ls_model.poles())
-    run = ("its free-run simulation diverges" if fit_ls is None else
-           f"its free-run tracking-error fit on this recording is {fit_ls.tracking_error_fit_pct:.1f} %")
-    if not violated:
-        return (f"Unconstrained least squares gives poles {poles}, inside the bounds, and {run}; "
-                f"the constraints are not active here.")
-    roots = np.roots(ls_model.denominator)
-    growth = float(np.max(roots.real))
-    if growth > 0:
-        tau = 1.0 / growth
-        why = (f"an unstable model (a pole in the right half-plane, error growing e-fold every {tau:.3g} s"
-               + (f", slower than this {duration_s:.0f} s recording shows" if tau > 0.3 * duration_s else "")
-               + ")")
-    else:
-        why = "poles outside the allowed region (" + ", ".join(violated) + ")"
-    return (f"Unconstrained least squares gives poles {poles}: {why}, and {run}. "
-            f"Such a model cannot be trusted on a longer part program or used in a virtual machine; the "
-            f"constraints of eq. 3.8 keep every pole at a stable, physically meaningful frequency and damping, "
-            f"and the constrained model reaches {fit_final.tracking_error_fit_pct:.1f} %.")
-
-
-def _models_from_json(path: Path) -> dict[str, DriveModel]:
-    try:
-        doc = json.loads(Path(path).read_text())
-        return {a: DriveModel(**{k: float(v) for k, v in r["model"].items()}) for a, r in doc["axes"].items()}
-    except FileNotFoundError:
-        raise InputError(f"--model {path}: no such file") from None
-    except (ValueError, KeyError, TypeError) as exc:
-        raise InputError(f"--model {path}: not an `agent identify --json` result ({exc})") from None
-
-
-def _axis(rec: Recording, axis: str, opts: IdentifyOptions, val: Recording | None,
-          against: Recording | None, prior: DriveModel | None) -> AxisResult:
-    Ts = rec.sample_period
-    tr = rec.axes[axis]
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
-    reg = build_regression(tr.commanded, tr.actual, Ts, rec.segment, axis=axis)
-    timings["regression"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    ls = solve_ls(reg.Phi, reg.Y, opts.bounds, sample_period=Ts)
-    if opts.solver == "ls":
-        constrained = ls
-    elif opts.solver == "ga":
-        constrained = solve(opts.solver, reg.Phi, reg.Y, opts.bounds, sample_period=Ts, seed=opts.seed,
-                            population=opts.ga_population, generations=opts.ga_generations)
-    else:
-        constrained = solve(opts.solver, reg.Phi, reg.Y, opts.bounds, sample_period=Ts)
-    timings["solver"] = time.perf_counter() - t0
-
-    refined = None
-    model = constrained.model
-    if prior is not None:
-        model = prior
-    elif opts.refine and opts.solver != "ls":
-        t0 = time.perf_counter()
-        refined = refine_model(constrained.model, tr.commanded, tr.actual, Ts, segment=rec.segment,
-                               shift=reg.shift, bounds=opts.bounds, regression=reg)
-        model = refined.model
-        timings["refinement"] = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    x_hat = _free_run(model, rec, axis, reg.shift)
-    fit_id = fit_result(tr.commanded - tr.actual, tr.commanded - x_hat)
-    fit_eq = _fit_or_none(constrained.model, rec, axis, reg.shift) or FitResult(float("nan"), float("nan"))
-    fit_ls = _fit_or_none(ls.model, rec, axis, reg.shift)
-    val_traces = None
-    fit_val = None
-    if val is not None:
-        vt = val.axes[axis]
-        xv_hat = _free_run(model, val, axis, reg.shift)
-        fit_val = fit_result(vt.commanded - vt.actual, vt.commanded - xv_hat)
-        val_traces = AxisTraces(val.t, vt.commanded, vt.actual, xv_hat, val.segment)
-    timings["fits"] = time.perf_counter() - t0
-
-    diagnosis = None
-    if opts.diagnose:
-        t0 = time.perf_counter()
-        diagnosis = _diagnose(rec, axis, model, val, against)
-        timings["diagnosis"] = time.perf_counter() - t0
-
-    return AxisResult(
-        axis=axis, model=model, constrained=constrained, unconstrained=ls, refined=refined,
-        bounds=opts.bounds, sample_period=Ts, shift=reg.shift,
-        fit_identification=fit_id, fit_validation=fit_val, fit_constrained=fit_eq, fit_unconstrained=fit_ls,
-        unconstrained_note=_ls_note(ls.model, opts.bounds, Ts, fit_ls, fit_id, rec.duration),
-        diagnosis=diagnosis, timings=timings,
-        traces=AxisTraces(rec.t, tr.commanded, tr.actual, x_hat, rec.segment),
-        validation_traces=val_traces,
-    )
-
-
-def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | None, against: Recording | None):
-    """Run the diagnosis on the command *as recorded*.
-
-    The preview shift of the identification is deliberately not applied: a dead time is
-    one of the effects the diagnosis looks for, and a shift would hide it.  The diagnosis
-    re-fits the base model in its own simulator before trying any effect.
+    ``options`` are :func:`ident.identify`'s keywords (axes, solver, diagnose, bounds ...).
     """
-    try:
-        from ident.diagnosis import diagnose
-    except ModuleNotFoundError:  # diagnosis package not installed in this build
-        return None
-    tr = rec.axes[axis]
-    validation = None
-    if val is not None:
-        vt = val.axes[axis]
-        validation = (vt.commanded, vt.actual, val.segment)
-    sim_actual = None
-    if against is not None:
-        if axis not in against.axes or against.n_samples != rec.n_samples:
-            raise InputError(f"--against: the simulated log must hold axis {axis} with the same "
-                             f"{rec.n_samples} samples as the recording (it has {against.n_samples})")
-        sim_actual = against.axes[axis].actual
-    return diagnose(tr.commanded, tr.actual, rec.sample_period, model,
-                    segment=rec.segment, validation=validation, against=sim_actual)
+    result = identify_recording(
+        load_recording(path),
+        validate=load_recording(validate) if validate is not None else None,
+        against=load_recording(against) if against is not None else None,
+        prior=load_models(model) if model is not None else None,
+        **options,
+    )
+    if json_out is not None:
+        try:
+            Path(json_out).write_text(result.to_json())
+        except OSError as exc:
+            from core.errors import InputError
 
-
-def _contour(results: dict[str, AxisResult], rec: Recording, val: Recording | None) -> ContourResult | None:
-    names = list(results)
-    for source, which in ((val, "validation"), (rec, "identification")):
-        if source is None:
-            continue
-        axes = [a for a in names if a in source.axes]
-        if len(axes) < 2:
-            continue
-        ax, ay = axes[:2]
-        traces = {a: (results[a].validation_traces if which == "validation" else results[a].traces) for a in (ax, ay)}
-        tx, ty = traces[ax], traces[ay]
-        if tx is None or ty is None:
-            continue
-        measured = contour_error(tx.commanded, ty.commanded, tx.actual, ty.actual)
-        predicted = contour_error(tx.commanded, ty.commanded, tx.simulated, ty.simulated)
-        return ContourResult((ax, ay), which, tx.t, measured, predicted)
-    return None
-
-
-def identify(path: Path, *, validate: Path | None = None, against: Path | None = None,
-             options: IdentifyOptions = IdentifyOptions()) -> IdentifyResult:
-    """Identify every (or the chosen) axis of the recording at ``path``."""
-    t_start = time.perf_counter()
-    rec = _load(path)
-    axes = _pick_axes(rec, options.axes, path)
-    val = _load(validate) if validate is not None else None
-    if val is not None:
-        missing = [a for a in axes if a not in val.axes]
-        if missing:
-            raise InputError(f"--validate {validate}: axis {missing[0]} is not in it "
-                             f"(it has {', '.join(val.axis_names)})")
-        if not np.isclose(val.sample_period, rec.sample_period, rtol=1e-6):
-            raise RecordingError(f"--validate {validate}: sample period {val.sample_period * 1e3:.4g} ms differs "
-                                 f"from the recording's {rec.sample_period * 1e3:.4g} ms")
-    sim = load_recording(against) if against is not None else None
-    priors = _models_from_json(options.model_json) if options.model_json else {}
-    for a in axes:
-        if priors and a not in priors:
-            raise InputError(f"--model {options.model_json}: has no model for axis {a}")
-    results = {a: _axis(rec, a, options, val, sim, priors.get(a)) for a in axes}
-    contour = _contour(results, rec, val)
-    meta = {k: v for k, v in rec.metadata.items() if k not in ("events", "counter")}
-    return IdentifyResult(str(path), str(validate) if validate else None, results, contour,
-                          time.perf_counter() - t_start, meta)
+            raise InputError.about("json", f"{json_out}: cannot write ({exc.strerror})") from None
+    if report is not None:
+        result.report(report)
+    return result

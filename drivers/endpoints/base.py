@@ -68,7 +68,7 @@ class Endpoint(abc.ABC):
         self.options = options
         self.linger_s = float(options.get("linger", self.default_linger_s))
         if self.linger_s < 0:
-            raise InputError(f"--linger must be >= 0 s, got {self.linger_s}")
+            raise InputError.about("linger", f"linger must be >= 0 s, got {self.linger_s}")
         #: set to stop serving early (SIGINT/SIGTERM in ``agent serve``)
         self.stop_event = threading.Event()
         #: controller counters of ticks not put on the wire for reasons outside the fault
@@ -142,11 +142,11 @@ def parse_endpoint_options(cls: type[Endpoint], pairs: list[str]) -> dict[str, A
     out: dict[str, Any] = {}
     for pair in pairs:
         if "=" not in pair:
-            raise InputError(f"--opt {pair!r}: expected NAME=VALUE")
+            raise InputError.about("options", f"{pair!r}: expected NAME=VALUE")
         key, text = (s.strip() for s in pair.split("=", 1))
         if key not in types:
             known = ", ".join(sorted(types))
-            raise InputError(f"--opt {key!r}: not an option of the {cls.name} endpoint (known: {known})")
+            raise InputError.about("options", f"{key!r}: not an option of the {cls.name} endpoint (known: {known})")
         kind = types[key]
         try:
             if kind is bool:
@@ -159,6 +159,6 @@ def parse_endpoint_options(cls: type[Endpoint], pairs: list[str]) -> dict[str, A
             else:
                 value = kind(text)
         except ValueError:
-            raise InputError(f"--opt {key}={text!r} is not a valid {kind.__name__}") from None
+            raise InputError.about("options", f"{key}={text!r} is not a valid {kind.__name__}") from None
         out[key] = value
     return out

@@ -143,7 +143,7 @@ class CanEndpoint(Endpoint):
         big = max(np.abs(cmd).max(initial=0), np.abs(act).max(initial=0))
         if big >= 2**31:
             raise InputError(f"can endpoint: a position of {big / per_mm.max():g} mm does not fit INTEGER32 "
-                             f"at {per_mm.max():g} increments per mm; lower --opt scale=")
+                             f"at {per_mm.max():g} increments per mm; lower the scale option")
         self._cmd = cmd.astype(np.int64).tolist()
         self._act = act.astype(np.int64).tolist()
         self._bus: can.BusABC | None = None

@@ -80,7 +80,7 @@ class SerialEndpoint(Endpoint):
         big = max(np.abs(cmd).max(initial=0), np.abs(act).max(initial=0))
         if big >= 2**31:
             raise InputError(f"serial endpoint: a position of {big / self.counts_per_mm:g} mm does not fit "
-                             f"int32 at {self.counts_per_mm} counts/mm; lower --opt scale=")
+                             f"int32 at {self.counts_per_mm} counts/mm; lower the scale option")
         self._cmd = cmd.astype(np.int64).tolist()
         self._act = act.astype(np.int64).tolist()
         self._counter = source.counter.tolist()

@@ -1,7 +1,7 @@
 """The ``agent serve`` workflow: run programs on the virtual CNC, then serve the result in real time.
 
 Steps: build the :class:`~core.recording.Recording` (the G-code programs through
-:func:`virtual_cnc.machine_run.run_programs`, or an existing log given with
+:func:`virtual_cnc.machine_run.simulate`, or an existing log given with
 ``recording=``), wrap it in a :class:`~drivers.endpoints.source.RealTimeSource` with the
 fault plan, pick the transport's endpoint from :data:`ENDPOINTS`, start it, print
 ``port: <url>`` as the FIRST line of stdout (flushed: a test or script reads it to know
@@ -42,7 +42,7 @@ def endpoint_class(transport: str) -> type[Endpoint]:
     try:
         module_name, class_name = ENDPOINTS[transport]
     except KeyError:
-        raise InputError(f"--transport {transport!r} is not known (known: {', '.join(ENDPOINTS)})") from None
+        raise InputError.about("transport", f"transport {transport!r} is not known (known: {', '.join(ENDPOINTS)})") from None
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
@@ -56,17 +56,17 @@ def build_recording(programs: Sequence[str | Path] = (), machine: str | Path | N
     """The samples to serve: the programs run on the virtual CNC, or a recorded log replayed."""
     if recording is not None:
         if programs:
-            raise InputError("give either --program or --recording, not both")
+            raise InputError("give either programs or a recording to serve, not both")
         from core.reader import load_recording
 
         return load_recording(recording)
     if not programs:
-        raise InputError("no program to serve; give --program FILE (or --recording LOG)")
+        raise InputError.about("programs", "no program to serve; give a G-code program (or a recording to replay)")
     for p in programs:
         if not Path(p).is_file():
-            raise InputError(f"--program {p}: no such file")
+            raise InputError.about("programs", f"{p}: no such file")
     try:
-        from virtual_cnc.machine_run import run_programs
+        from virtual_cnc.machine_run import simulate as run_programs
     except ImportError as exc:
         raise TransportError(f"the virtual CNC is not available: {exc}") from exc
     return run_programs([Path(p) for p in programs], machine=machine, effects=list(effects), seed=seed)
@@ -95,13 +95,13 @@ def serve(
     stdout : where the ``port: <url>`` line goes (default sys.stdout).
     """
     if not speed > 0:
-        raise InputError(f"--speed must be > 0, got {speed}")
+        raise InputError.about("speed", f"speed must be > 0, got {speed}")
     faults = faults or FaultPlan()
-    for name, rate in (("--drop-rate", faults.drop_rate), ("--corrupt-rate", faults.corrupt_rate)):
+    for name, rate in (("drop_rate", faults.drop_rate), ("corrupt_rate", faults.corrupt_rate)):
         if not 0 <= rate < 1:
-            raise InputError(f"{name} must be in [0, 1), got {rate}")
+            raise InputError.about(name, f"{name.replace('_', ' ')} must be in [0, 1), got {rate}")
     if faults.drop_rate + faults.corrupt_rate >= 1:
-        raise InputError("--drop-rate + --corrupt-rate must stay below 1")
+        raise InputError("drop rate + corrupt rate must stay below 1")
     cls = endpoint_class(transport)
     if isinstance(options, list):
         options = parse_endpoint_options(cls, options)
@@ -138,4 +138,4 @@ def _write_json(path: str | Path, data: dict) -> None:
         tmp.write_text(json.dumps(data))
         tmp.replace(path)
     except OSError as exc:
-        raise InputError(f"--fault-log {path}: cannot write ({exc.strerror})") from exc
+        raise InputError.about("fault_log", f"{path}: cannot write ({exc.strerror})") from exc

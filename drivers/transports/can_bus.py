@@ -75,7 +75,7 @@ def _int_list(url, name: str) -> list[int] | None:
     try:
         return [int(v, 0) for v in text.split(",") if v.strip()]
     except ValueError:
-        raise InputError(f"--port {url.raw}: option {name}={text!r} is not a comma-separated list of integers") from None
+        raise InputError.about("port", f"{url.raw}: option {name}={text!r} is not a comma-separated list of integers") from None
 
 
 class CanDriver(Driver):
@@ -92,12 +92,12 @@ class CanDriver(Driver):
         super().__init__(url, axes)
         self.interface = url.host
         if not self.interface:
-            raise InputError(f"--port {url.raw}: name the python-can interface, e.g. can://udp_multicast/239.74.163.2")
+            raise InputError.about("port", f"{url.raw}: name the python-can interface, e.g. can://udp_multicast/239.74.163.2")
         channel = url.path[1:] if url.path.startswith("/") else url.path
         self.channel = channel or _DEFAULT_CHANNEL.get(self.interface, "")
         self.timeout_s = url.option("timeout", float, 5.0)
         if not self.timeout_s > 0:
-            raise InputError(f"--port {url.raw}: timeout must be > 0 s")
+            raise InputError.about("port", f"{url.raw}: timeout must be > 0 s")
         self._bus: can.BusABC | None = None
         self._dispatch: dict[int, tuple] = {}
         self._backlog: collections.deque = collections.deque()  # frames read while opening
@@ -116,7 +116,7 @@ class CanDriver(Driver):
             kw["port"] = self.url.option("port", int, 43113)
             kw["hop_limit"] = self.url.option("ttl", int, 1)
         elif self.url.option("port", int) is not None or self.url.option("ttl", int) is not None:
-            raise InputError(f"--port {self.url.raw}: port= and ttl= apply to udp_multicast only")
+            raise InputError.about("port", f"{self.url.raw}: port= and ttl= apply to udp_multicast only")
         if self.url.option("sync", bool, False) and self.interface != "udp_multicast":
             # our own SYNC must come back in the receive stream, in order with the TPDOs
             # answering it (udp_multicast loops every datagram back to its own socket anyway)
@@ -143,18 +143,18 @@ class CanDriver(Driver):
         text = self.url.option("axes", str)
         names = [a.strip() for a in text.split(",") if a.strip()] if text else list(DEFAULT_AXES[:n])
         if len(names) != n:
-            raise InputError(f"--port {self.url.raw}: {len(names)} axes for {n} nodes; give one axis name per node")
+            raise InputError.about("port", f"{self.url.raw}: {len(names)} axes for {n} nodes; give one axis name per node")
         if len(set(names)) != n:
-            raise InputError(f"--port {self.url.raw}: axis names repeat in axes={text}")
+            raise InputError.about("port", f"{self.url.raw}: axis names repeat in axes={text}")
         stext = self.url.option("scale", str)
         try:
             scales = [float(v) for v in stext.split(",")] if stext else [DEFAULT_SCALE]
         except ValueError:
-            raise InputError(f"--port {self.url.raw}: scale={stext!r} is not a number or a comma-separated list") from None
+            raise InputError.about("port", f"{self.url.raw}: scale={stext!r} is not a number or a comma-separated list") from None
         if len(scales) == 1:
             scales = scales * n
         if len(scales) != n or not all(s > 0 for s in scales):
-            raise InputError(f"--port {self.url.raw}: scale needs one positive value or one per axis ({n})")
+            raise InputError.about("port", f"{self.url.raw}: scale needs one positive value or one per axis ({n})")
         return names, scales
 
     def _wanted(self, names: list[str]) -> list[int]:
@@ -162,7 +162,7 @@ class CanDriver(Driver):
             return list(range(len(names)))
         missing = [a for a in self.wanted_axes if a not in names]
         if missing:
-            raise InputError(f"--axes: axis {missing[0]!r} is not on this bus (axes: {','.join(names)})")
+            raise InputError.about("axes", f"axis {missing[0]!r} is not on this bus (axes: {','.join(names)})")
         return [names.index(a) for a in self.wanted_axes]
 
     def _open(self) -> StreamInfo:
@@ -184,17 +184,17 @@ class CanDriver(Driver):
         nodes = _int_list(url, "nodes")
         single = url.option("node", int)
         if nodes is None and single is None:
-            raise InputError(f"--port {url.raw}: give the drives' node ids, e.g. nodes=1,2,3 (or node=3)")
+            raise InputError.about("port", f"{url.raw}: give the drives' node ids, e.g. nodes=1,2,3 (or node=3)")
         if nodes is not None and single is not None:
-            raise InputError(f"--port {url.raw}: give nodes= or node=, not both")
+            raise InputError.about("port", f"{url.raw}: give nodes= or node=, not both")
         nodes = nodes if nodes is not None else [single]
         if not nodes or not all(1 <= n <= 127 for n in nodes) or len(set(nodes)) != len(nodes):
-            raise InputError(f"--port {url.raw}: node ids must be distinct, 1..127 (got {nodes})")
+            raise InputError.about("port", f"{url.raw}: node ids must be distinct, 1..127 (got {nodes})")
         names, scales = self._axes_and_scales(len(nodes))
         keep = self._wanted(names)
         status_id = url.option("status", int, 0)
         if status_id and (not 1 <= status_id <= 127 or status_id in nodes):
-            raise InputError(f"--port {url.raw}: status node {status_id} must be 1..127 and not an axis node")
+            raise InputError.about("port", f"{url.raw}: status node {status_id} must be 1..127 and not an axis node")
         eds = Path(url.option("eds", str, str(com.DEFAULT_AXIS_EDS)))
         use_sdo = url.option("sdo", bool, True)
 
@@ -216,7 +216,7 @@ class CanDriver(Driver):
                 pump.stop()  # from here on the driver reads the bus itself, backlog first
         period = url.option("period", float) or sync.period_s
         if not period or period <= 0:
-            raise InputError(f"--port {url.raw}: the sample period is unknown (0x1006 is 0); give period= in s")
+            raise InputError.about("port", f"{url.raw}: the sample period is unknown (0x1006 is 0); give period= in s")
 
         self._sync_cob = sync.cob_id
         self._overflow = sync.overflow
@@ -252,7 +252,7 @@ class CanDriver(Driver):
         url = self.url
         for name in ("nodes", "node", "status", "eds", "scale", "sdo"):
             if url.option(name, str) is not None:
-                raise InputError(f"--port {url.raw}: option {name}= is for CANopen; with dbc= the DBC gives the layout")
+                raise InputError.about("port", f"{url.raw}: option {name}= is for CANopen; with dbc= the DBC gives the layout")
         from drivers.transports.dbc_map import load_dbc  # cantools only when a DBC is used
 
         text = url.option("axes", str)
@@ -262,7 +262,7 @@ class CanDriver(Driver):
         cycle = getattr(layout.tick_message, "cycle_time", None)
         period = url.option("period", float) or ((cycle or 0) / 1000.0)
         if not period > 0:
-            raise InputError(f"--port {url.raw}: the sample period is unknown; give period= in s")
+            raise InputError.about("port", f"{url.raw}: the sample period is unknown; give period= in s")
         remap = {i: k for k, i in enumerate(keep)}
         parts = [(p, [(remap[i], c, a, f) for (i, c, a), f in zip(p.axes, p.per_mm) if i in remap])
                  for p in layout.parts]
@@ -286,7 +286,7 @@ class CanDriver(Driver):
     # -- SYNC production (sync=1 only) ---------------------------------------------------
     def _start_sync(self, period: float) -> None:
         if self._mode != "canopen":
-            raise InputError(f"--port {self.url.raw}: sync=1 applies to CANopen (not with dbc=)")
+            raise InputError.about("port", f"{self.url.raw}: sync=1 applies to CANopen (not with dbc=)")
         self._sync_thread = threading.Thread(target=self._sync_loop, args=(period,), name="can-sync", daemon=True)
         self._sync_thread.start()
 

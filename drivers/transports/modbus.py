@@ -125,14 +125,14 @@ class ModbusDriver(Driver):
         self.mode_option = url.option("mode", str)
         self.map_path = url.option("map", str)
         if self.mode_option is not None and self.mode_option not in ("trace", "live"):
-            raise InputError(f"--port {url.raw}: mode={self.mode_option!r}; use trace or live")
+            raise InputError.about("port", f"{url.raw}: mode={self.mode_option!r}; use trace or live")
         for name, value in (("timeout", self.timeout), ("reconnect_s", self.reconnect_s)):
             if not value > 0:
-                raise InputError(f"--port {url.raw}: {name}={value} must be > 0 s")
+                raise InputError.about("port", f"{url.raw}: {name}={value} must be > 0 s")
         if url.scheme == "modbus-tcp" and not url.host:
-            raise InputError(f"--port {url.raw}: no host; use modbus-tcp://HOST:PORT")
+            raise InputError.about("port", f"{url.raw}: no host; use modbus-tcp://HOST:PORT")
         if url.scheme == "modbus-rtu" and not url.path:
-            raise InputError(f"--port {url.raw}: no device; use modbus-rtu:///dev/ttyUSB0?baud=115200")
+            raise InputError.about("port", f"{url.raw}: no device; use modbus-rtu:///dev/ttyUSB0?baud=115200")
         self.rmap: RegisterMap | None = None
         #: extra counts beyond CaptureStats: ticks missing (counter gaps; the capture loop counts
         #: these as dropped, so stats.dropped stays 0), timeouts, busy answers, requests sent
@@ -154,10 +154,10 @@ class ModbusDriver(Driver):
                                    trace_pdu=_read_only_guard)
         parity = url.option("parity", str, "N").upper()
         if parity not in ("N", "E", "O"):
-            raise InputError(f"--port {url.raw}: parity={parity!r}; use N, E or O")
+            raise InputError.about("port", f"{url.raw}: parity={parity!r}; use N, E or O")
         stopbits = url.option("stopbits", int, 1)
         if stopbits not in (1, 2):
-            raise InputError(f"--port {url.raw}: stopbits={stopbits}; use 1 or 2")
+            raise InputError.about("port", f"{url.raw}: stopbits={stopbits}; use 1 or 2")
         baud = url.option("baud", int, 115200)
         client = ModbusSerialClient(url.path, framer=FramerType.RTU, baudrate=baud,
                                     parity=parity, stopbits=stopbits, timeout=self.timeout, retries=0,
@@ -328,11 +328,11 @@ class ModbusDriver(Driver):
         period = float(info.get("period_s", rmap.sample_period_s))
         self.mode = self.mode_option or ("trace" if rmap.trace is not None else "live")
         if self.mode == "trace" and rmap.trace is None:
-            raise InputError(f"--port {self.url.raw}: mode=trace but register map {rmap.source} has no [trace] block")
+            raise InputError.about("port", f"{self.url.raw}: mode=trace but register map {rmap.source} has no [trace] block")
         names = list(rmap.axis_names)
         unknown = [a for a in (self.wanted_axes or []) if a not in names]
         if unknown:
-            raise InputError(f"--axes: the controller has no axis {unknown[0]!r} (axes: {', '.join(names)})")
+            raise InputError.about("axes", f"the controller has no axis {unknown[0]!r} (axes: {', '.join(names)})")
         # Every axis is decoded; the capture loop keeps the --axes it wants.
         self._cols = list(range(len(names)))
         self._scale = np.array([rmap.axes[i].scale_mm for i in self._cols])

@@ -55,7 +55,7 @@ class SerialDriver(Driver):
     def __init__(self, url: PortURL, axes: list[str] | None = None) -> None:
         super().__init__(url, axes)
         if not url.path:
-            raise InputError(f"--port {url.raw}: no device path; use serial:///dev/ttyUSB0")
+            raise InputError.about("port", f"{url.raw}: no device path; use serial:///dev/ttyUSB0")
         self.path = url.path
         self.format = url.option("format", str, "binary")
         self.codec = codec_for(self.format)
@@ -63,7 +63,7 @@ class SerialDriver(Driver):
         self.open_timeout = url.option("open_timeout", float, 3.0)
         self.reconnect_s = url.option("reconnect", float, 5.0)
         if self.baud <= 0:
-            raise InputError(f"--port {url.raw}: baud must be > 0, got {self.baud}")
+            raise InputError.about("port", f"{url.raw}: baud must be > 0, got {self.baud}")
         self._ser: serial.Serial | None = None
         self._frame_info: InfoFrame | None = None
         self._pending: list[SampleFrame] = []  # samples seen before the first info frame

@@ -454,7 +454,6 @@ def diagnose(
     segment: np.ndarray | None = None,
     validation: tuple[np.ndarray, np.ndarray, np.ndarray | None] | None = None,
     against: np.ndarray | None = None,
-    seed: int = 0,
     effects: tuple[str, ...] = EFFECTS,
 ) -> Diagnosis:
     """Diagnose the mismatch between a recording of one axis and its drive model.
@@ -472,10 +471,8 @@ def diagnose(
         A second recording (mm) to score candidates on; otherwise two-fold
         cross-validation over the halves of every segment.
     against : ndarray (N,), optional
-        Actual position (mm) of a simulated recording of the same program (``--against``):
+        Actual position (mm) of a simulated recording of the same program (the ``against`` recording):
         the mismatch is then localised on ``against − x``.
-    seed : int
-        Kept for reproducible variants; the procedure itself is deterministic.
     effects : the effects of SPEC §7 to try (all by default).
 
     Raises
