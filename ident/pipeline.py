@@ -20,14 +20,14 @@ import numpy as np
 from core.errors import InputError, RecordingError
 from core.reader import load_recording
 from core.recording import Recording
+from ident.axis_model import AxisModel
 from ident.contour import contour_error
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel
-from ident.preprocessing import prepare_recording, shift_command
+from ident.preprocessing import prepare_recording
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
 from ident.results import AxisResult, AxisTraces, ContourResult, IdentifyResult
-from ident.simulation import simulate
 from ident.solvers import solve, solve_ls
 
 __all__ = ["identify", "load_models"]
@@ -73,8 +73,7 @@ def _pick_axes(rec: Recording, wanted: Sequence[str] | None) -> list[str]:
 
 def _free_run(model: DriveModel, rec: Recording, axis: str, shift: int) -> np.ndarray:
     tr = rec.axes[axis]
-    return simulate(model, shift_command(tr.commanded, shift, rec.segment), rec.sample_period,
-                    segment=rec.segment, x0=tr.actual)
+    return AxisModel(model, rec.sample_period, shift).simulate(tr.commanded, segment=rec.segment, x0=tr.actual)
 
 
 def _fit_or_none(model: DriveModel, rec: Recording, axis: str, shift: int) -> FitResult | None:

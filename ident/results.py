@@ -9,12 +9,16 @@ from typing import Any
 
 import numpy as np
 
+from ident.axis_model import BASE_KEYS, AxisModel
 from ident.metrics import FitResult
 from ident.model import Bounds, DriveModel
 from ident.refine import RefineResult
 from ident.solvers.common import SolverResult
 
-__all__ = ["AxisTraces", "AxisResult", "ContourResult", "IdentifyResult"]
+__all__ = ["AxisTraces", "AxisResult", "ContourResult", "IdentifyResult", "RESULT_FORMAT"]
+
+#: ``format`` of the result JSON; version 2 carries each axis's ``virtual_model``.
+RESULT_FORMAT = "rapid-ident-result/2"
 
 
 @dataclass(frozen=True)
@@ -55,20 +59,34 @@ class AxisResult:
     traces: AxisTraces | None = None
     validation_traces: AxisTraces | None = None
 
+    @property
+    def base_model(self) -> AxisModel:
+        """The identified eq. 3.3 with its preview shift: what the fit figures score."""
+        return AxisModel(self.model, self.sample_period, self.shift)
+
+    @property
+    def virtual_model(self) -> AxisModel:
+        """What the virtual machine runs: the diagnosed model with its accepted effects, if any.
+
+        The diagnosis re-fits the base parameters together with the effects (on the
+        command as recorded, no preview shift); without an accepted effect the virtual
+        machine runs the identified model.
+        """
+        aug = getattr(self.diagnosis, "augmented_model", None) or {}
+        if aug.get("effects"):
+            base = aug["base"]
+            return AxisModel(DriveModel(**{k: float(base[k]) for k in BASE_KEYS}), self.sample_period, 0,
+                             {e: dict(p) for e, p in aug["effects"].items()}, aug.get("controller", "continuous"))
+        return self.base_model
+
     def predict(self, x_r: np.ndarray, *, segment: np.ndarray | None = None,
                 x0: float | np.ndarray | None = None) -> np.ndarray:
-        """Free-run actual position (mm) the model predicts for the commanded ``x_r`` (mm).
+        """Free-run actual position (mm) the identified model predicts for the commanded ``x_r`` (mm).
 
-        Applies the identification's preview shift (``shift`` samples, §4.3.2) so the
-        prediction matches the fit figures; ``segment`` and ``x0`` as in
-        :func:`ident.simulation.simulate`.
+        Applies the identification's preview shift (§4.3.2) so the prediction matches
+        the fit figures; ``segment`` and ``x0`` as in :meth:`AxisModel.simulate`.
         """
-        from ident.preprocessing import shift_command
-        from ident.simulation import simulate
-
-        x_r = np.asarray(x_r, dtype=float)
-        return simulate(self.model, shift_command(x_r, self.shift, segment), self.sample_period,
-                        segment=segment, x0=x0)
+        return self.base_model.simulate(x_r, segment=segment, x0=x0)
 
     @property
     def active_constraints(self) -> tuple[str, ...]:
@@ -109,6 +127,7 @@ class AxisResult:
                                  "nfev": int(self.refined.nfev), "improved": bool(self.refined.improved)}
         if self.diagnosis is not None:
             out["diagnosis"] = self.diagnosis.to_dict()
+        out["virtual_model"] = self.virtual_model.to_dict()
         out["timings_s"] = {k: round(float(v), 4) for k, v in self.timings.items()}
         return out
 
@@ -148,6 +167,7 @@ class IdentifyResult:
 
     def to_dict(self) -> dict[str, Any]:
         return {
+            "format": RESULT_FORMAT,
             "source": self.source,
             "validation_source": self.validation_source,
             "axes": {name: r.to_dict() for name, r in self.axes.items()},

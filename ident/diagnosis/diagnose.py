@@ -655,6 +655,7 @@ def diagnose(
         })
     aug = {"base": dict(zip(_BASE_KEYS, map(float, final.theta))),
            "effects": {e: effect_parameters(final, e) for e in accepted},
+           "controller": "sampled" if final.modes[4] else "continuous",
            "held_out": scheme}
     verdict: str | list[str]
     if not accepted:
