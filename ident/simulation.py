@@ -293,12 +293,18 @@ class FreeRun:
         self.xr_dot, self.xr_ddot = xr_dot, xr_ddot
         self.substeps = max(int(substeps), 1)
 
-    def __call__(self, model) -> np.ndarray:
-        """Simulated actual position x̂ (N,), mm, of ``model`` (DriveModel-like)."""
+    def __call__(self, model, disturbance: np.ndarray | None = None) -> np.ndarray:
+        """Simulated actual position x̂ (N,), mm, of ``model`` (DriveModel-like).
+
+        ``disturbance`` (N,), mm/s², is an extra acceleration entering where ``u`` does
+        (a load; see :mod:`ident.diagnosis.disturbance`), held linear between samples.
+        """
         if self.n == 0:
             return np.empty(0)
         a1, a2, a3, b0, b1, b2, d0, d1 = _params(model)
         u = b0 * self.xr_ddot + b1 * self.xr_dot + b2 * self.x_r
+        if disturbance is not None:
+            u = u + np.asarray(disturbance, dtype=float)
         m = self.substeps
         Phi, G0, G1 = discretise(model, self.Ts / m)
         return _free_run(self.x_r, u, self.starts, self.stops, self.x_init, self.v_init,
@@ -313,6 +319,7 @@ def simulate(
     segment: np.ndarray | None = None,
     x0: float | np.ndarray | None = None,
     substeps: int = DEFAULT_SUBSTEPS,
+    disturbance: np.ndarray | None = None,
 ) -> np.ndarray:
     """Free-run response x̂ (mm) of eq. 3.3 to the commanded trajectory alone.
 
@@ -334,10 +341,12 @@ def simulate(
         start of a single-segment recording.
     substeps : int
         Sub-steps per sample for resolving friction switching (the linear part is exact).
+    disturbance : ndarray (N,), optional
+        Extra acceleration input, mm/s² (an external load), added to the command drive.
 
     Returns
     -------
     ndarray (N,)
         Simulated actual position at the sample instants, mm.
     """
-    return FreeRun(x_r, Ts, segment=segment, x0=x0, substeps=substeps)(model)
+    return FreeRun(x_r, Ts, segment=segment, x0=x0, substeps=substeps)(model, disturbance)
