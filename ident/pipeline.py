@@ -13,7 +13,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -123,7 +123,7 @@ def load_models(path: str | Path) -> dict[str, DriveModel]:
         raise InputError.about("model", f"{path}: not an identification result JSON ({exc})") from None
 
 
-def _axis(rec: Recording, axis: str, opts: IdentifyOptions, val: Recording | None,
+def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recording | None,
           against: Recording | None, prior: DriveModel | None) -> AxisResult:
     Ts = rec.sample_period
     tr = rec.axes[axis]
@@ -171,7 +171,8 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, val: Recording | Non
     diagnosis = None
     if opts.diagnose:
         t0 = time.perf_counter()
-        diagnosis = _diagnose(rec, axis, model, val, against)
+        diagnosis = _diagnose(rec, axis, model, val, against,
+                              (lambda msg: progress(f"axis {axis}: {msg}")) if progress else None)
         timings["diagnosis"] = time.perf_counter() - t0
 
     return AxisResult(
@@ -185,7 +186,8 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, val: Recording | Non
     )
 
 
-def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | None, against: Recording | None):
+def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | None, against: Recording | None,
+              progress=None):
     """Run the diagnosis on the command *as recorded*.
 
     The preview shift of the identification is deliberately not applied: a dead time is
@@ -205,7 +207,7 @@ def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | Non
             raise InputError.about("against", f"the simulated recording must hold axis {axis} with the same "
                                    f"{rec.n_samples} samples as the recording (it has {against.n_samples})")
         sim_actual = against.axes[axis].actual
-    return diagnose(tr.commanded, tr.actual, rec.sample_period, model,
+    return diagnose(tr.commanded, tr.actual, rec.sample_period, model, progress=progress,
                     segment=rec.segment, validation=validation, against=sim_actual)
 
 
@@ -250,6 +252,7 @@ def identify(
     seed: int = 0,
     ga_population: int = 4000,
     ga_generations: int = 500,
+    progress: Callable[[str], None] | None = None,
 ) -> IdentifyResult:
     """Identify the drive model of every (or each chosen) axis of a recording.
 
@@ -267,6 +270,7 @@ def identify(
     bounds : pole constraints of eq. 3.8 (SPEC §5 defaults).
     refine : output-error refinement after the equation-error solve.
     seed, ga_population, ga_generations : of the genetic algorithm (``solver="ga"``).
+    progress : called with a short description of each diagnosis stage (a progress line).
 
     Returns
     -------
@@ -300,7 +304,7 @@ def identify(
         for a in names:
             if priors and a not in priors:
                 raise InputError.about("model", f"the given models have none for axis {a}")
-        results = {a: _axis(rec, a, opts, val, sim, priors.get(a)) for a in names}
+        results = {a: _axis(rec, a, opts, progress, val, sim, priors.get(a)) for a in names}
         contour = _contour(results, rec, val)
     meta = {k: v for k, v in rec.metadata.items() if k not in ("events", "counter", "source")}
     return IdentifyResult(_name(rec, "<in memory>"), _name(val, "<in memory>") if val is not None else None,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 from typing import List, Optional
 
@@ -42,14 +43,29 @@ def identify(
         if path is not None and path.suffix.lower() != suffix:
             raise InputError(f"{flag} {path}: expected a {suffix} file")
     axes = [a for item in axis for a in item.split(",") if a.strip()]
-    result = identify_files(
-        log, validate=validate, against=against, model=model, json_out=json_out, report=report,
-        axes=axes or None, solver=solver, diagnose=diagnose, refine=refine, seed=seed,
-        bounds=Bounds(p_min_hz=p_min_hz, wn_min_hz=wn_min_hz, zeta_min=zeta_min, zeta_max=zeta_max,
-                      f_max_hz=f_max_hz),
-        ga_population=ga_population, ga_generations=ga_generations,
-    )
+    with _progress_line() as progress:
+        result = identify_files(
+            log, validate=validate, against=against, model=model, json_out=json_out, report=report,
+            axes=axes or None, solver=solver, diagnose=diagnose, refine=refine, seed=seed,
+            bounds=Bounds(p_min_hz=p_min_hz, wn_min_hz=wn_min_hz, zeta_min=zeta_min, zeta_max=zeta_max,
+                          f_max_hz=f_max_hz),
+            ga_population=ga_population, ga_generations=ga_generations, progress=progress,
+        )
     print_summary(result)
     for path in (json_out, report):
         if path is not None:
             typer.echo(f"wrote {path}")
+
+
+@contextmanager
+def _progress_line():
+    """A transient status line on stderr while the diagnosis runs (only on a terminal)."""
+    import sys
+
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.console import Console
+
+    with Console(stderr=True).status("identifying …") as status:
+        yield lambda msg: status.update(f"diagnosis, {msg} …")

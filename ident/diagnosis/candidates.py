@@ -440,8 +440,10 @@ def start_groups(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict) -> 
             groups.append([({"static_to_coulomb_ratio": r, "stribeck_velocity_mm_s": v}, {})
                            for v in (0.2, 1.0, 0.02 * vmax)])
     elif effect == "resonance":
-        fs = [p["freq_hz"] for p in evidence.get("spectrum_peaks", [])[:2] if p["freq_hz"] > 20.0]
-        for f in list(np.geomspace(60.0, 0.3 / Ts, 3)):
+        # the residual's spectrum peaks first, then a log grid over the band machine-tool modes
+        # occupy (10 Hz up to 0.3/Ts): a mode near the loop bandwidth shows lower in closed loop
+        fs = [p["freq_hz"] for p in evidence.get("spectrum_peaks", [])[:2] if p["freq_hz"] > MIN_MODE_HZ]
+        for f in list(np.geomspace(10.0, 0.3 / Ts, 4)):
             if all(abs(np.log(f / c)) > 0.2 for c in fs):
                 fs.append(float(f))
         for f in fs:
@@ -578,9 +580,11 @@ def fit_effect(spec: ModelSpec, effect: str, chunk: Chunk, evidence: dict, *, sh
     return _fit_effect_from(spec, effect, chunk, evidence, short_iter=short_iter, max_iter=max_iter)
 
 
-#: Resonance starts at the residual spectrum peaks above 20 Hz that hold at least this share
-#: of the residual power above 20 Hz (a mode concentrates it: ≥ 20 % in the benchmark; a dead
-#: time spreads it over small peaks: ≤ 11 %) …
+#: Lowest frequency a resonance is started at, Hz (below, the loop itself and the moves dominate).
+MIN_MODE_HZ = 5.0
+#: Resonance starts at the residual spectrum peaks above MIN_MODE_HZ that hold at least this
+#: share of the residual power (above 20 Hz, or in all for a lower peak; a mode concentrates
+#: it: ≥ 20 % in the benchmark; a dead time spreads it over small peaks: ≤ 11 %) …
 PEAK_MIN_SHARE = 0.15
 #: … the first this many of them, each held inside this band (× the peak frequency): a
 #: two-mass mode shows between f·√μ and f, so its free-free frequency lies above the peak
@@ -634,7 +638,7 @@ def fit_resonance_at_peaks(sampled: ModelSpec, chunk: Chunk, evidence: dict, *, 
     None when the spectrum has no such peak (``PEAK_MIN_SHARE``).
     """
     peaks = [p["freq_hz"] for p in evidence.get("spectrum_peaks", [])
-             if p.get("share_above_20_hz", 0.0) >= PEAK_MIN_SHARE]
+             if p["freq_hz"] > MIN_MODE_HZ and max(p.get("share_above_20_hz", 0.0), p.get("power_share", 0.0)) >= PEAK_MIN_SHARE]
     base_v = sse(sampled, chunk)
     best, best_v = None, np.inf
     for fp in peaks[:PEAK_STARTS]:

@@ -217,7 +217,10 @@ def analyse_disturbance(w: np.ndarray, x_r: np.ndarray, x: np.ndarray, v_r: np.n
     time_share = sum(j - i for i, j in spans) / max(n, 1)
     res["explained"] = explained
     res["state_families_together"] = share_state
-    res["dominant"] = max(explained, key=explained.get)
+    # time blocks name the cause only when they are localised (an external load); otherwise
+    # the family of state variables that explains most does
+    states = {k: v for k, v in explained.items() if k != "time_blocks"}
+    res["dominant"] = max(states, key=states.get)
     res["blocks"] = blocks[:20]
     res["blocks_time_share"] = float(time_share)
     res["time_localised"] = bool(
