@@ -4,11 +4,16 @@ The identified drive models are checked by predicting the tracking and contourin
 of contours the machine runs at a given feed (200 mm/s in the thesis).  Both contours fit
 in a square of side ``size`` centred on ``center``:
 
-* ``circle``: diameter ``size``; a rapid to the start point (centre + radius along the
-  first axis), then one full circle (G03 counter-clockwise or G02 clockwise, I/J centre
-  offsets; ``CC``/``C DR±`` in Heidenhain), ending where it began.
+* ``circle``: diameter ``size``; a rapid to the start point (centre + radius at
+  ``start_deg``, 0° = along the first axis), then one full circle (G03 counter-clockwise
+  or G02 clockwise, I/J centre offsets; ``CC``/``C DR±`` in Heidenhain), ending where it
+  began.  The synthetic ballbar starts at 45° so that the exact-stop start and end of the
+  circle fall between the four axis reversals (0°, 90°, 180°, 270°).
 * ``diamond``: a square rotated 45°, vertices at centre ± size/2 on each axis; a rapid to
   the right-hand vertex, then four G01 sides counter-clockwise (or clockwise).
+
+After the positioning rapid both dwell ``settle_s`` (G04) so the contour starts with the
+drives at rest: its errors are then the contour's own, not the rapid's settling.
 """
 
 from __future__ import annotations
@@ -43,7 +48,8 @@ def _check(kind: str, size: float, feed: float, center: Sequence[float], axes: S
         raise InputError(f"direction must be ccw or cw, got {direction!r}")
 
 
-def _header(kind: str, size: float, feed: float, center: Sequence[float], axes: Sequence[str], direction: str) -> dict[str, str]:
+def _header(kind: str, size: float, feed: float, center: Sequence[float], axes: Sequence[str], direction: str,
+            settle_s: float, **extra: float) -> dict[str, str]:
     return {
         "generator": GENERATOR,
         "program": f"validation {kind}",
@@ -54,7 +60,15 @@ def _header(kind: str, size: float, feed: float, center: Sequence[float], axes: 
         "feed": format(float(feed), ".12g"),
         "feed_units": "mm/s",
         "direction": direction,
+        "settle_s": format(float(settle_s), ".12g"),
+        **{k: format(float(v), ".12g") for k, v in extra.items()},
     }
+
+
+def _settle(settle_s: float) -> tuple[Block, ...]:
+    if not math.isfinite(settle_s) or settle_s < 0:
+        raise InputError(f"settle time must be >= 0 s, got {settle_s}")
+    return (Block(line=0, n=None, motion="G4", dwell_s=float(settle_s)),) if settle_s > 0 else ()
 
 
 def _q(x: float, decimals: int) -> float:
@@ -69,24 +83,33 @@ def circle(
     direction: str = "ccw",
     name: str = "circle",
     decimals: int = 4,
+    start_deg: float = 0.0,
+    settle_s: float = 0.2,
 ) -> Toolpath:
     """A full circle of diameter ``size`` mm at ``feed`` mm/s around ``center`` (mm).
 
-    ``direction`` "ccw" writes G03 (Heidenhain DR+), "cw" writes G02 (DR-).
+    ``direction`` "ccw" writes G03 (Heidenhain DR+), "cw" writes G02 (DR-); the circle
+    starts and ends at ``start_deg`` (degrees from the first axis, counter-clockwise).
     """
     axes = tuple(a.upper() for a in axes)
     _check("circle", size, feed, center, axes, direction)
+    if not math.isfinite(start_deg):
+        raise InputError(f"start angle must be a number of degrees, got {start_deg}")
     cx, cy = (_q(c, decimals) for c in center)
     r = _q(size / 2.0, decimals)
     if r <= 0:
         raise InputError(f"circle size {size} mm is below the output resolution")
-    start = {axes[0]: _q(cx + r, decimals), axes[1]: cy}
+    phi = math.radians(start_deg)
+    start = {axes[0]: _q(cx + r * math.cos(phi), decimals), axes[1]: _q(cy + r * math.sin(phi), decimals)}
     blocks = (
         Block(line=0, n=None, motion="G0", target=dict(start)),
+        *_settle(settle_s),
         Block(line=1, n=None, motion="G3" if direction == "ccw" else "G2", target=dict(start),
               feed=float(feed), center={axes[0]: cx, axes[1]: cy}),
     )
-    return Toolpath(name=name, blocks=blocks, header=_header("circle", size, feed, center, axes, direction), decimals=decimals)
+    extra = {"start_deg": start_deg} if start_deg else {}
+    return Toolpath(name=name, blocks=blocks, decimals=decimals,
+                    header=_header("circle", size, feed, center, axes, direction, settle_s, **extra))
 
 
 def diamond(
@@ -97,6 +120,7 @@ def diamond(
     direction: str = "ccw",
     name: str = "diamond",
     decimals: int = 4,
+    settle_s: float = 0.2,
 ) -> Toolpath:
     """A diamond (square turned 45°) with vertices at ``center`` ± ``size``/2 mm, at ``feed`` mm/s."""
     axes = tuple(a.upper() for a in axes)
@@ -108,10 +132,12 @@ def diamond(
     a, b = axes
     right, top, left, bottom = ((cx + h, cy), (cx, cy + h), (cx - h, cy), (cx, cy - h))
     corners = [top, left, bottom, right] if direction == "ccw" else [bottom, left, top, right]
-    blocks = [Block(line=0, n=None, motion="G0", target={a: _q(right[0], decimals), b: _q(right[1], decimals)})]
+    blocks = [Block(line=0, n=None, motion="G0", target={a: _q(right[0], decimals), b: _q(right[1], decimals)}),
+              *_settle(settle_s)]
     for k, (x, y) in enumerate(corners, start=1):
         blocks.append(Block(line=k, n=None, motion="G1", target={a: _q(x, decimals), b: _q(y, decimals)}, feed=float(feed)))
-    return Toolpath(name=name, blocks=tuple(blocks), header=_header("diamond", size, feed, center, axes, direction), decimals=decimals)
+    return Toolpath(name=name, blocks=tuple(blocks), decimals=decimals,
+                    header=_header("diamond", size, feed, center, axes, direction, settle_s))
 
 
 #: name -> generator function, for the CLI.

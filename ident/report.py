@@ -9,16 +9,14 @@ after the left-out physics is added.
 
 from __future__ import annotations
 
-import base64
 import html
-import io
 import json
 import math
 from pathlib import Path
 
 import numpy as np
 
-from core.errors import InputError
+from ident.html_page import page, plt, png, table, write_html
 from ident.results import AxisResult, AxisTraces, IdentifyResult
 
 __all__ = ["write_report", "render_report"]
@@ -26,20 +24,8 @@ __all__ = ["write_report", "render_report"]
 _MAX_POINTS = 6000
 
 
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _png(fig) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    _plt().close(fig)
-    return '<img alt="figure" src="data:image/png;base64,' + base64.b64encode(buf.getvalue()).decode() + '">'
+_plt = plt
+_png = png
 
 
 def _decimate(*arrays: np.ndarray) -> list[np.ndarray]:
@@ -170,9 +156,7 @@ def _diagnosis_plots(r: AxisResult) -> str:
     return "\n".join(out)
 
 
-def _table(rows: list[tuple[str, str]]) -> str:
-    body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(v)}</td></tr>" for k, v in rows)
-    return f"<table>{body}</table>"
+_table = table
 
 
 def _g(v: float) -> str:
@@ -233,12 +217,6 @@ def _axis_section(r: AxisResult) -> str:
     return "\n".join(parts)
 
 
-_CSS = """body{font-family:system-ui,sans-serif;max-width:1150px;margin:auto;padding:1em;color:#222}
-table{border-collapse:collapse;margin:.5em 0}th,td{border:1px solid #ccc;padding:3px 8px;text-align:left;font-size:14px}
-th{background:#f3f3f3}img{max-width:100%;margin:.5em 0}.verdict{font-weight:600;background:#fff8e0;padding:.5em}
-pre{font-size:12px;background:#f7f7f7;padding:.5em;overflow:auto}"""
-
-
 def render_report(result: IdentifyResult) -> str:
     """The report as one HTML string."""
     head = [f"<h1>rapid-ident: drive identification</h1>",
@@ -255,15 +233,9 @@ def render_report(result: IdentifyResult) -> str:
                             ("predicted max", f"{c['predicted']['max_abs_mm'] * 1e3:.2f} µm"),
                             ("prediction error rms", f"{c['prediction_error']['rms_mm'] * 1e3:.2f} µm")]))
         body.append(_contour_plot(result))
-    return ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>rapid-ident report</title>"
-            f"<style>{_CSS}</style></head><body>" + "\n".join(head + body) + "</body></html>")
+    return page("rapid-ident report", head + body)
 
 
 def write_report(result: IdentifyResult, path: str | Path) -> Path:
     """Write the report to ``path`` (one self-contained .html file)."""
-    path = Path(path)
-    try:
-        path.write_text(render_report(result), encoding="utf-8")
-    except OSError as exc:
-        raise InputError.about("report", f"{path}: cannot write ({exc.strerror})") from None
-    return path
+    return write_html(render_report(result), path)

@@ -128,6 +128,8 @@ class AxisResult:
         if self.diagnosis is not None:
             out["diagnosis"] = self.diagnosis.to_dict()
         out["virtual_model"] = self.virtual_model.to_dict()
+        if self.traces is not None:
+            out["virtual_model"]["identified_range"] = _identified_range(self.traces)
         out["timings_s"] = {k: round(float(v), 4) for k, v in self.timings.items()}
         return out
 
@@ -190,6 +192,15 @@ class IdentifyResult:
     def models(self) -> dict[str, DriveModel]:
         """The final drive model of each axis."""
         return {name: r.model for name, r in self.axes.items()}
+
+
+def _identified_range(tr: AxisTraces) -> dict[str, Any]:
+    """Speed and travel the model was identified over: where the virtual machine interpolates."""
+    x = np.asarray(tr.commanded, dtype=float)
+    same = np.diff(tr.segment) == 0
+    dt = np.diff(tr.t)
+    v = np.abs(np.diff(x))[same] / dt[same] if x.size > 1 else np.zeros(1)
+    return {"max_speed_mm_s": float(np.max(v, initial=0.0)), "travel_mm": [float(x.min()), float(x.max())]}
 
 
 def _json_default(obj: Any) -> Any:

@@ -60,7 +60,9 @@ def test_writes_a_validation_toolpath(tmp_path, kind):
     prog = read_program(res.stdout.strip())
     assert prog.header["toolpath"] == kind and prog.header["size"] == "30"
     assert prog.name == kind
-    moves = [b for b in prog.blocks if b.motion != "G0"]
+    # positioning rapid, a dwell so the drives settle, then the contour at the feed
+    assert [b.motion for b in prog.blocks[:2]] == ["G0", "G4"] and prog.blocks[1].dwell_s == 0.2
+    moves = [b for b in prog.blocks if b.motion not in ("G0", "G4")]
     assert all(b.feed == 150.0 for b in moves)
     assert {b.motion for b in moves} == ({"G3"} if kind == "circle" else {"G1"})
 

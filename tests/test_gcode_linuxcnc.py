@@ -53,13 +53,17 @@ def test_linuxcnc_runs_the_program_with_the_same_moves(tmp_path, tp, blending):
     assert "PROGRAM_END" in [name for name, _ in calls]
 
     ours = parse_program(path.read_text())
-    moves = [(n, [float(a) for a in args]) for n, args in calls if n in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "ARC_FEED")]
+    moves = [(n, [float(a) for a in args]) for n, args in calls
+             if n in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED", "ARC_FEED", "DWELL")]
     assert len(moves) == len(ours.blocks)
     feed = None
     feeds = iter(float(args[0]) for n, args in calls if n == "SET_FEED_RATE" and float(args[0]) > 0)
     for (name, args), b in zip(moves, ours.blocks):
-        kind = {"G0": "STRAIGHT_TRAVERSE", "G1": "STRAIGHT_FEED", "G2": "ARC_FEED", "G3": "ARC_FEED"}[b.motion]
+        kind = {"G0": "STRAIGHT_TRAVERSE", "G1": "STRAIGHT_FEED", "G2": "ARC_FEED", "G3": "ARC_FEED", "G4": "DWELL"}[b.motion]
         assert name == kind
+        if name == "DWELL":
+            assert args[0] == pytest.approx(b.dwell_s)
+            continue
         assert args[0] == pytest.approx(b.target["X"], abs=5e-5)
         assert args[1] == pytest.approx(b.target["Y"], abs=5e-5)
         if name == "ARC_FEED":

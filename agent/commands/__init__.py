@@ -12,6 +12,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("agent.commands.serve", "serve"),
     "capture": ("agent.commands.capture", "capture"),
     "identify": ("agent.commands.identify", "identify"),
+    "predict": ("agent.commands.predict", "predict"),
+    "ballbar": ("agent.commands.ballbar", "ballbar"),
 }
 
 

@@ -14,7 +14,8 @@ def simulate(
     programs: List[Path] = typer.Argument(..., help="G-code programs, run in order as separate segments."),
     out: Path = typer.Option(..., "-o", "--out", help="Output log (.mcap), the same layout a capture writes."),
     machine: Optional[str] = typer.Option(
-        None, "--machine", help="Machine preset name or TOML machine file (default: fadal-ppi)."),
+        None, "--machine", help="Machine preset name, TOML machine file, or the result JSON of agent identify "
+                                "(the identified drives; default: fadal-ppi)."),
     effect: List[str] = typer.Option(
         [], "--effect", help="Add physics: NAME=VALUE or NAME=key:value,key:value (SPEC §7), repeatable."),
     seed: int = typer.Option(0, "--seed", help="Seed of the encoder noise."),
@@ -24,12 +25,25 @@ def simulate(
 
     Example: agent simulate prog/ident_low.ngc prog/ident_high.ngc --machine fadal-pid -o run.mcap
     """
+    from agent.workflows.predict import is_identified_machine
     from core.writer import write_recording_csv, write_recording_mcap
-    from virtual_cnc import simulate as run_programs
 
     if out.suffix.lower() != ".mcap":
         raise InputError(f"-o {out}: the log must be a .mcap file (use --csv for CSV)")
-    rec = run_programs(programs, machine=machine, effects=effect, seed=seed)
+    if is_identified_machine(machine):
+        from ident.virtual_machine import load_virtual_machine
+
+        if effect:
+            raise InputError("--effect adds physics to a built-in machine; an identified machine runs the effects "
+                             "its diagnosis accepted (agent predict --set changes them)")
+        prediction = load_virtual_machine(machine).run(programs)
+        for w in prediction.warnings:
+            typer.echo(f"warning: {w}", err=True)
+        rec = prediction.recording
+    else:
+        from virtual_cnc import simulate as run_programs
+
+        rec = run_programs(programs, machine=machine, effects=effect, seed=seed)
     write_recording_mcap(rec, out)
     if csv is not None:
         write_recording_csv(rec, csv)
@@ -40,6 +54,8 @@ def _print_summary(rec, out: Path, csv: Optional[Path]) -> None:
     import numpy as np
 
     typer.echo(f"wrote {out}" + (f" and {csv}" if csv else ""))
+    if rec.metadata.get("actual_is"):
+        typer.echo(f"actual positions {rec.metadata['actual_is']}")
     typer.echo(f"machine {rec.metadata.get('machine')}, {rec.n_samples} samples at "
                f"{1.0 / rec.sample_period:.0f} Hz, {rec.duration:.2f} s, {len(rec.segments())} segment(s)")
     for name, tr in rec.axes.items():

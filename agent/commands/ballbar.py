@@ -1,0 +1,65 @@
+"""``agent ballbar``: the ISO 230-4 circular test run on identified drives, read as a ballbar user reads it."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from core.errors import InputError
+
+
+def ballbar(
+    machine: List[Path] = typer.Option([], "--machine", help="Result JSON of agent identify --json; repeat to compare."),
+    set_: List[str] = typer.Option([], "--set", help="Override a parameter, AXIS.PARAM=VALUE: a second machine to compare."),
+    radius: float = typer.Option(100.0, "--radius", help="Ballbar length (circle radius), mm."),
+    feed: float = typer.Option(1000.0 / 60.0, "--feed", help="Test feed, mm/s (default 1000 mm/min)."),
+    axes: str = typer.Option("X,Y", "--axes", help="The plane: two axis letters."),
+    centre: str = typer.Option("0,0", "--centre", help="Circle centre in the plane, mm."),
+    against: List[Path] = typer.Option([], "--against", help="Recordings of the same test (ccw and cw): overlay measured."),
+    report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
+) -> None:
+    """Run the ballbar test on the identified machine(s) and print what the plot shows.
+
+    Example: agent ballbar --machine result.json --radius 100 --feed 16.67 --report ballbar.html
+    """
+    from agent.workflows.predict import load_machines
+    from core.reader import load_recording
+    from ident.synthetic_ballbar import run_ballbar
+
+    for path, flag, suffix in ((json_out, "--json", ".json"), (report, "--report", ".html")):
+        if path is not None and path.suffix.lower() != suffix:
+            raise InputError(f"{flag} {path}: expected a {suffix} file")
+    plane = tuple(a.strip().upper() for a in axes.split(",") if a.strip())
+    try:
+        c = tuple(float(v) for v in centre.split(","))
+    except ValueError:
+        c = ()
+    if len(c) != 2:
+        raise InputError(f"--centre {centre!r}: two numbers, e.g. 0,0")
+    recordings = [load_recording(p) for p in against]
+    tests = [run_ballbar(m, radius=radius, feed=feed, axes=plane, centre=c, against=recordings if i == 0 else ())
+             for i, m in enumerate(load_machines(machine, set_))]
+    for t in tests:
+        typer.echo(f"machine {t.machine}: ballbar R {radius:g} mm at {feed:g} mm/s")
+        for w in t.words():
+            typer.echo(f"  {w}")
+        if t.measured is not None:
+            from ident.ballbar import words
+
+            typer.echo("  recorded: " + "; ".join(words(t.measured)))
+    if json_out is not None:
+        try:
+            json_out.write_text(json.dumps({"format": "rapid-ident-ballbar/1", "tests": [t.to_dict() for t in tests]},
+                                           indent=2, allow_nan=False))
+        except OSError as exc:
+            raise InputError.about("json", f"{json_out}: cannot write ({exc.strerror})") from None
+        typer.echo(f"wrote {json_out}")
+    if report is not None:
+        from ident.ballbar_report import write_ballbar_report
+
+        write_ballbar_report(report, tests)
+        typer.echo(f"wrote {report}")

@@ -1,0 +1,57 @@
+"""``agent predict``: run part programs on identified drives; tracking and contour errors, where."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from core.errors import InputError
+
+
+def predict(
+    programs: List[Path] = typer.Argument(..., help="G-code programs, run in order as separate segments."),
+    machine: List[Path] = typer.Option([], "--machine", help="Result JSON of agent identify --json; repeat to compare machines."),
+    set_: List[str] = typer.Option([], "--set", help="Override a parameter, AXIS.PARAM=VALUE (X.a1=120, "
+                                                      "Y.backlash.gap_mm=0.01): a second machine to compare, repeatable."),
+    against: List[Path] = typer.Option([], "--against", help="A recording of the same motion: measured vs predicted."),
+    report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
+    out: Optional[Path] = typer.Option(None, "-o", "--out", help="Write the prediction as a log (.mcap or .csv)."),
+) -> None:
+    """Predict the tracking and contour errors of PROGRAMs on the identified machine(s).
+
+    Example: agent predict part.ngc --machine result.json --set X.a1=150 --report predicted.html
+    """
+    from agent.workflows.predict import load_machines, predict_files
+
+    for path, flag, suffix in ((json_out, "--json", (".json",)), (report, "--report", (".html",)),
+                               (out, "--out", (".mcap", ".csv"))):
+        if path is not None and path.suffix.lower() not in suffix:
+            raise InputError(f"{flag} {path}: expected a {' or '.join(suffix)} file")
+    machines = load_machines(machine, set_)
+    summaries, comparisons = predict_files(programs, machines, against=against, json_out=json_out,
+                                           report=report, out=out)
+    for s in summaries:
+        typer.echo(f"machine {s.machine}")
+        for w in s.warnings:
+            typer.echo(f"  warning: {w}")
+        if s.contour_max_mm is not None:
+            line = f"  contour error max {s.contour_max_mm * 1e3:.2f} µm, rms {s.contour_rms_mm * 1e3:.2f} µm"
+            if s.worst:
+                p = s.worst[0]
+                feed = f", feed {p.feed_mm_s:g} mm/s" if p.feed_mm_s else ""
+                line += f"; largest at {p.program} line {p.line}, t = {p.t_s:.3f} s{feed}"
+            typer.echo(line)
+        for a, e in s.tracking.items():
+            typer.echo(f"  {a}: tracking error max {e.max_abs_mm * 1e3:.2f} µm ({e.program} line {e.line}), "
+                       f"rms {e.rms_mm * 1e3:.2f} µm")
+    for c in comparisons:
+        d = c.to_dict()
+        typer.echo(f"against {c.source}: contour error max measured {d['measured_max_abs_mm'] * 1e3:.2f} µm, "
+                   f"predicted {d['predicted_max_abs_mm'] * 1e3:.2f} µm; rms of the difference "
+                   f"{d['rms_difference_ratio'] * 100:.1f} % of the measured rms")
+    for path in (out, json_out, report):
+        if path is not None:
+            typer.echo(f"wrote {path}")

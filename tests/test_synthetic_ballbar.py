@@ -1,0 +1,85 @@
+"""The synthetic ballbar on identified drives (issue 15): what the ISO 230-4 test of the
+identified machine shows is what the drives' own test shows, and its figures are right."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+from typer.testing import CliRunner
+
+import gcode_gen
+import ident
+import virtual_cnc
+from agent import cli
+from ident.synthetic_ballbar import START_DEG, ballbar_of_recording, run_ballbar
+
+cli._register()
+
+R, V = 100.0, 1000.0 / 60.0  # the QC20's standard bar at 1000 mm/min
+
+
+def identified_machine(machine, effects=(), diagnose=False) -> ident.VirtualMachine:
+    rec = virtual_cnc.simulate(gcode_gen.generate(["X", "Y"], seed=3), machine, effects=effects, seed=3)
+    val = virtual_cnc.simulate(gcode_gen.generate(["X", "Y"], seed=4), machine, effects=effects, seed=4)
+    doc = json.loads(ident.identify(rec, validate=val, diagnose=diagnose).to_json())
+    return ident.VirtualMachine.from_result(doc, "identified")
+
+
+def drives_own_test(machine, effects=()):
+    """The ballbar test run on the virtual CNC itself, read the same way: the truth."""
+    recs = [virtual_cnc.simulate([gcode_gen.circle(size=2 * R, feed=V, direction=d, start_deg=START_DEG)],
+                                 machine, effects=effects, seed=7) for d in ("ccw", "cw")]
+    return ballbar_of_recording(recs, ("X", "Y"), R, V)
+
+
+@pytest.fixture(scope="module")
+def mismatched(tmp_path_factory):
+    """fadal-ppi with the Y position gain lowered from 30 to 21 1/s: Y lags X."""
+    path = tmp_path_factory.mktemp("m") / "mismatched.toml"
+    path.write_text('base = "fadal-ppi"\n[axes.Y]\nKp = 21.0\n')
+    return str(path)
+
+
+def test_mismatched_loops_show_the_ellipse_on_the_right_diagonal_and_the_lag_difference(mismatched):
+    test = run_ballbar(identified_machine(mismatched), radius=R, feed=V)
+    truth_ms = 1e3 * (1 / 30.0 - 1 / 21.0)  # P-PI without feedforward lags by 1/Kp at low frequency
+    assert test.result.servo_mismatch_ms == pytest.approx(truth_ms, rel=0.10)
+    assert test.model_servo_mismatch_ms == pytest.approx(truth_ms, rel=0.10)
+    own = drives_own_test(mismatched)
+    assert test.result.servo_ellipse_deg == own.servo_ellipse_deg == {"ccw": 135, "cw": 45}
+    assert any(w.startswith("servo mismatch") and "Y lags X" in w for w in test.words())
+
+
+@pytest.mark.slow
+def test_backlash_on_one_axis_shows_at_its_reversals_with_the_drives_size():
+    effects = ["backlash=gap_mm:0.03,axis:X"]
+    vm = identified_machine("fadal-ppi", effects, diagnose=True)
+    assert "backlash" in vm.axes["X"].effects and "backlash" not in vm.axes["Y"].effects
+    test = run_ballbar(vm, radius=R, feed=V)
+    own = drives_own_test("fadal-ppi", effects)
+    x, own_x = test.result.axis_reversals[0], own.axis_reversals[0]
+    assert x.axis == "X" and x.angles_deg == (0.0, 180.0)
+    assert x.spike_um == pytest.approx(own_x.spike_um, rel=0.25)
+    assert x.step_um == pytest.approx(own_x.step_um, rel=0.25)
+    # the model says the X backlash causes part of what shows at the X reversals
+    causes = test.causes["X"]
+    assert causes["model"]["step_um"] - causes["without_backlash"]["step_um"] > 0.5
+
+
+def test_agent_ballbar_prints_the_reading_and_writes_a_self_contained_report(tmp_path, mismatched):
+    vm = identified_machine(mismatched)
+    result = tmp_path / "result.json"
+    doc = {"format": "rapid-ident-result/2", "axes": {a: {"virtual_model": m.to_dict()} for a, m in vm.axes.items()}}
+    result.write_text(json.dumps(doc))
+    res = CliRunner().invoke(cli.app, ["ballbar", "--machine", str(result), "--report", str(tmp_path / "b.html"),
+                                       "--json", str(tmp_path / "b.json")])
+    assert res.exit_code == 0, res.output
+    assert "servo mismatch" in res.output and "Y lags X" in res.output
+    text = (tmp_path / "b.html").read_text()
+    assert "data:image/png;base64," in text and "http" not in text.replace("http-equiv", "")
+    out = json.loads((tmp_path / "b.json").read_text())
+    assert math.isclose(out["tests"][0]["radius_mm"], 100.0)
+    bad = CliRunner().invoke(cli.app, ["ballbar", "--machine", str(result), "--axes", "X,Z"])
+    assert bad.exit_code == 2 and bad.output.startswith("error:") and len(bad.output.strip().splitlines()) == 1
