@@ -20,6 +20,7 @@ __all__ = [
     "IdentificationError",
     "TransportError",
     "TransportTimeout",
+    "StreamError",
     "RapidIdentWarning",
 ]
 
@@ -80,6 +81,12 @@ class TransportError(RapidIdentError):
 
 class TransportTimeout(TransportError, TimeoutError):
     """The controller did not answer within the timeout."""
+
+
+class StreamError(TransportError):
+    """The controller's data arrives but cannot be recorded as read: counters that never
+    match where they are read from (word order, register layout), or a stream that
+    changes mid-capture.  A capture that ends with it ends ``"unusable data"``."""
 
 
 class RapidIdentWarning(UserWarning):

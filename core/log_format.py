@@ -8,17 +8,24 @@ One MCAP file per capture or simulation (documented in docs/recording-format.md)
       {"counter": 1234, "t": 1.234, "segment": 0,
        "commanded": {"X": 1.2345, "Y": -0.5}, "actual": {"X": 1.2331, "Y": -0.5004}}
 
-  ``log_time`` = controller time (counter x period) in integer ns from the start of the
-  recording; ``publish_time`` = host receive time in ns since the Unix epoch.
+  ``log_time`` = ``t`` in integer ns, i.e. the controller's own sample counter x period:
+  it starts wherever the controller's counter stood (0 for ``agent simulate``, the
+  controller's running counter for a capture), never at the host clock;
+  ``publish_time`` = host receive time in ns since the Unix epoch.
   Positions in mm (deg for rotary axes).  In Foxglove, plot ``/samples.commanded.X``
   against ``/samples.actual.X``.
 * topic ``/events`` (JSON, schema ``rapid_ident.Event``): gaps, corrupt frames,
-  reconnects and segment (program) starts, as they happen.
+  reconnects, segment (program) starts, plausibility warnings and the end, as they happen
+  (kinds: :data:`EVENT_KINDS`).
 * the ``/samples`` channel metadata holds what is known at the start: sample period,
   axes, units, transport, controller, programs.
 * an MCAP metadata record ``rapid-ident.summary`` written when the recording closes
-  cleanly: counts of received, dropped and corrupt samples and why it ended.  A log
-  without it was cut off (e.g. the capture was killed).
+  cleanly: counts of received, dropped and corrupt samples and why it ended (``end``,
+  one of :data:`END_REASONS`, with ``error`` saying what went wrong, empty if nothing
+  did).  A log without it was cut off (e.g. the capture was killed).
+
+:data:`END_REASONS` and :data:`EVENT_KINDS` are the lists docs/recording-format.md
+documents; tests/test_log_docs.py checks that the document and these lists agree.
 """
 
 from __future__ import annotations
@@ -32,6 +39,35 @@ SUMMARY_METADATA = "rapid-ident.summary"
 
 SAMPLE_SCHEMA_NAME = "rapid_ident.Sample"
 EVENT_SCHEMA_NAME = "rapid_ident.Event"
+
+#: Every value the summary's ``end`` takes -> when (the capture loop in drivers/capture.py
+#: and the writer in core/writer.py use these names and no others).
+END_REASONS: dict[str, str] = {
+    "program ended": "the controller signalled the end of the program",
+    "duration": "the requested duration of controller time has been recorded",
+    "duration (host clock)": "the requested duration + 1 s of host time has passed "
+                             "(a controller slower than announced, or silent)",
+    "interrupted": "Ctrl-C (SIGINT)",
+    "terminated": "SIGTERM",
+    "transport error": "the link failed for good (port gone, connection not re-established, bus silent)",
+    "unusable data": "the controller sent data but (almost) none of it could be recorded, "
+                     "e.g. trace records whose counters never match (word order or map layout)",
+    "finished": "agent simulate: the whole simulated run was written",
+    "error": "an unexpected error stopped the recording (the summary's error names it)",
+}
+#: The end reasons after which ``agent capture`` exits non-zero (the summary's ``error`` says why).
+FAILED_ENDS = frozenset({"transport error", "unusable data", "error"})
+
+#: Every ``kind`` of an ``/events`` message -> what it marks.
+EVENT_KINDS: dict[str, str] = {
+    "dropped": "samples missing from a gap in the controller's counter (count = how many)",
+    "corrupt": "frames rejected by a checksum or format check (count = how many)",
+    "reconnect": "the link was re-established",
+    "segment": "a program (segment) starts (count = its index)",
+    "warning": "the data looks implausible (e.g. a position jumping faster than any feed drive moves)",
+    "end": "the recording ended: message = the end reason and, if any, the error",
+    "note": "anything else worth keeping with the log",
+}
 
 
 def sample_schema(axes: list[str]) -> bytes:
@@ -56,7 +92,7 @@ EVENT_SCHEMA = json.dumps(
         "title": EVENT_SCHEMA_NAME,
         "type": "object",
         "properties": {
-            "kind": {"type": "string", "description": "dropped | corrupt | reconnect | segment | note"},
+            "kind": {"type": "string", "description": " | ".join(EVENT_KINDS)},
             "counter": {"type": "integer"},
             "count": {"type": "integer"},
             "message": {"type": "string"},

@@ -36,7 +36,8 @@ class Recording:
     Attributes
     ----------
     t : ndarray, shape (N,)
-        Controller time in s (sample counter x period, starting at 0 for a capture).
+        Controller time in s: sample counter x period, from the controller's counter 0 (a
+        simulation starts there; a capture starts wherever the controller's counter stood).
     axes : dict[str, AxisTrace]
         Per-axis traces, in the recorded axis order (e.g. ``{"X": ..., "Y": ...}``).
     sample_period : float

@@ -22,6 +22,7 @@ from core.errors import InputError
 from core.log_format import (
     EVENT_SCHEMA,
     EVENT_SCHEMA_NAME,
+    END_REASONS,
     EVENTS_TOPIC,
     FORMAT,
     SAMPLE_SCHEMA_NAME,
@@ -134,6 +135,9 @@ class McapRecorder:
         """Write the ``rapid-ident.summary`` metadata and the footer; idempotent."""
         if self._closed:
             return
+        end = (summary or {}).get("end")
+        if end is not None and end not in END_REASONS:  # the documented list is the only one
+            raise ValueError(f"end reason {end!r} is not one of core.log_format.END_REASONS")
         self._closed = True
         summ = {"samples": str(self.count)}
         for key, value in (summary or {}).items():

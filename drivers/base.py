@@ -37,17 +37,22 @@ class CaptureStats:
     Drivers leave ``dropped`` at 0 for losses that show as a gap in the sample counter:
     the capture loop counts those (drivers.capture).  A driver adds to ``dropped`` only
     losses it knows of that cannot show as a gap.  ``corrupt`` counts frames rejected by
-    a checksum or format check; ``reconnects`` successful re-opens.
+    a checksum or format check; ``reconnects`` successful re-opens.  ``skipped`` counts
+    sample records that arrived intact but could not be made into a sample (a Modbus
+    trace slot not holding its counter, a CAN tick missing an axis' PDO): not a loss
+    count of its own (such ticks show as counter gaps too), but the capture loop compares
+    ``received`` with everything read to catch a capture that reads data and records none.
     """
 
     received: int = 0
     dropped: int = 0
     corrupt: int = 0  # frames/lines/responses rejected by a checksum or a format check
     reconnects: int = 0
+    skipped: int = 0  # intact sample records that could not be used
 
     def as_dict(self) -> dict[str, int]:
         return {"received": self.received, "dropped": self.dropped, "corrupt": self.corrupt,
-                "reconnects": self.reconnects}
+                "reconnects": self.reconnects, "skipped": self.skipped}
 
 
 class Driver(abc.ABC):
@@ -90,6 +95,15 @@ class Driver(abc.ABC):
         if self._is_open:
             self._is_open = False
             self._close()
+
+    def unusable_reason(self) -> str:
+        """Why the records counted in ``stats.skipped`` could not be used, in the driver's terms
+        (e.g. which map field to check); "" when the driver cannot tell."""
+        return ""
+
+    def position_hint(self, axis: str) -> str:
+        """Where the position scale and word order of ``axis`` are set, for a plausibility warning."""
+        return "the position scale the controller announces"
 
     def __enter__(self) -> "Driver":
         self.open()

@@ -33,6 +33,14 @@ Who counts what (no loss is counted twice):
 * ``received`` — samples written to the log; ``reconnects`` — from the driver.
 * ``duplicates`` — samples whose counter did not advance (repeated or out of order);
   not written, since recording time must increase.
+
+A capture that reads sample data but records none of it, or less than
+:data:`MIN_RECORDED_SHARE` of it (the rest rejected as corrupt or counted in the driver's
+``stats.skipped``), ends ``"unusable data"`` with the driver's reason in ``error``, never
+as an empty log that looks like a success.  Positions that jump faster than any feed
+drive moves are warned about once per axis (drivers.plausibility).  The summary's ``end``
+is always one of :data:`core.log_format.END_REASONS`; an ``/events`` entry ``end``
+repeats it, with the error, at the end of the log.
 """
 
 from __future__ import annotations
@@ -41,18 +49,26 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Iterator
 
-from core.errors import InputError, TransportError
+from core.errors import InputError, RapidIdentError, RapidIdentWarning, StreamError, TransportError
+from core.log_format import FAILED_ENDS
 from drivers.base import Driver, Sample, StreamInfo
 from core.writer import McapRecorder
+from drivers.plausibility import JumpCheck
 from drivers.registry import open_driver
 from drivers.url import parse_port_url
 
-__all__ = ["CaptureSummary", "capture", "select_axes"]
+__all__ = ["CaptureSummary", "capture", "select_axes", "MIN_RECORDED_SHARE"]
+
+#: Below this share of the sample records read (recorded + corrupt + skipped) being recorded,
+#: the capture has failed: a faulty link loses a few per cent, a map that does not fit the
+#: controller loses everything.
+MIN_RECORDED_SHARE = 0.5
 
 
 @dataclass
@@ -72,8 +88,10 @@ class CaptureSummary:
     last_counter: int | None = None
     duration_s: float = 0.0
     wall_s: float = 0.0
-    end: str = ""
-    error: str = ""
+    end: str = ""  # one of core.log_format.END_REASONS
+    error: str = ""  # what went wrong, "" if nothing did
+    skipped: int = 0  # intact sample records the driver could not use (CaptureStats.skipped)
+    warnings: list[str] = field(default_factory=list)  # plausibility warnings, as also in /events
 
     def as_metadata(self) -> dict:
         """The ``rapid-ident.summary`` record (JSON-able values)."""
@@ -246,6 +264,7 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
     n_max = None if duration is None else max(1, int(round(duration / T)))
     t0 = time.monotonic()
     bar = _Progress(progress, port)
+    jumps = JumpCheck(names, units, T, driver.position_hint)
     last = None  # last counter written
     last_seg = None
     seen_corrupt = seen_reconnects = 0
@@ -257,7 +276,8 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
             try:
                 batch = driver.read(read_timeout)
             except TransportError as exc:
-                summary.end, summary.error = "transport error", str(exc)
+                summary.end = "unusable data" if isinstance(exc, StreamError) else "transport error"
+                summary.error = str(exc)
                 break
             now_ns = time.time_ns()
             for s in batch:
@@ -284,6 +304,8 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
                 rec.write(s, now_ns)
                 summary.received += 1
                 last = c
+                for msg in jumps.check(s):
+                    _warn(rec, summary, c, msg)
             st = driver.stats
             if st.corrupt != seen_corrupt:
                 rec.event("corrupt", last or 0, st.corrupt - seen_corrupt, "frames rejected by the integrity check")
@@ -303,6 +325,10 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
             if duration is not None and time.monotonic() - t0 >= duration + 1.0:
                 summary.end = "duration (host clock)"
                 break
+    except Exception as exc:  # closing the log below keeps what was recorded, and says why it ended
+        summary.end = "error"
+        summary.error = str(exc) if isinstance(exc, RapidIdentError) else f"internal error {type(exc).__name__}: {exc}"
+        raise
     finally:
         stop.closing = True
         st = driver.stats
@@ -312,9 +338,41 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
         if last is not None:
             summary.duration_s = (last - summary.first_counter + 1) * T
         summary.wall_s = time.monotonic() - t0
-        if not summary.end:
+        summary.skipped = st.skipped
+        if not summary.end:  # a BaseException other than Exception (e.g. SystemExit)
             summary.end = "error"
+        _judge(summary, driver)
+        rec.event("end", last if last is not None else 0, summary.received,
+                  summary.end + (f": {summary.error}" if summary.error else ""))
         bar.update(summary, t0, force=True)
         bar.stop()
         rec.close(summary.as_metadata())
     return summary
+
+
+def _warn(rec: McapRecorder, summary: CaptureSummary, counter: int, message: str) -> None:
+    """A plausibility warning: in the log (``/events`` and the summary) and to the caller."""
+    rec.event("warning", counter, 0, message)
+    summary.warnings.append(message)
+    warnings.warn(message, RapidIdentWarning, stacklevel=3)
+
+
+def _judge(summary: CaptureSummary, driver: Driver) -> None:
+    """End ``"unusable data"`` when sample records were read but (almost) none recorded.
+
+    A capture that already failed keeps its own end and error.
+    """
+    if summary.end in FAILED_ENDS:
+        return
+    read = summary.received + summary.corrupt + summary.skipped
+    if not read or summary.received >= MIN_RECORDED_SHARE * read:
+        return
+    why = []
+    if summary.skipped:
+        why.append(f"{summary.skipped} unusable ({driver.unusable_reason() or 'the driver cannot say why'})")
+    if summary.corrupt:
+        why.append(f"{summary.corrupt} rejected by the integrity check (checksum, length or format)")
+    got = "none" if not summary.received else f"only {summary.received}"
+    summary.error = (f"{read} sample records arrived but {got} could be recorded (stopped by: {summary.end}): "
+                     + "; ".join(why))
+    summary.end = "unusable data"

@@ -22,9 +22,10 @@ is the default layout for axes X, Y, Z, the one the simulated endpoint serves)::
     segment = 259            # optional 16-bit program/segment index of the live sample
 
     [trace]                  # optional: the trace buffer (ring of records)
-    head = 260               # 32 bit: counter of the newest record + 1 (0 = empty)
-    capacity = 262           # 16 bit: number of record slots
-    base = 1024              # first register of slot 0; the record of counter c is in slot c mod capacity
+    head = 260               # address of the 32-bit head: counter of the newest record + 1 (0 = empty)
+    capacity = 262           # address of the 16-bit register holding the number of record slots
+    base = 1024              # first register of slot 0 (counter c is in slot c mod slots); the ring
+                             # fills every register from here up, so no other field may lie there
 
     [[axis]]
     name = "X"
@@ -35,7 +36,9 @@ is the default layout for axes X, Y, Z, the one the simulated endpoint serves)::
 
 A trace record is ``counter`` (32 bit), ``segment`` (16 bit), then for every axis in map
 order ``commanded``, ``actual`` (32 bit each, in that axis' word order):
-``record_words = 3 + 4 * n_axes`` registers.  A value in mm is ``count * scale_mm``.
+``record_words = 3 + 4 * n_axes`` registers.  A value in mm is
+``count / counts_per_unit(scale_mm)`` (:mod:`drivers.scaling`: the exact decimal when
+1/scale_mm is an integer).
 
 The info block is ``key=value`` lines (``controller=``, ``axes=X,Y,Z``, ``period_s=``,
 ``program=<name> <sha256>`` repeated), see :func:`encode_info` / :func:`decode_info`.
@@ -99,7 +102,8 @@ class AxisRegisters:
 
 @dataclass(frozen=True)
 class TraceBlock:
-    """The trace buffer: head counter (32 bit), capacity register (16 bit), ring base address."""
+    """Addresses of the trace buffer: head counter (32 bit), capacity register (16 bit, holding the
+    number of slots), ring base (the ring fills every register from there up)."""
 
     head: int
     capacity: int

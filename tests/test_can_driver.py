@@ -174,6 +174,25 @@ def test_the_driver_only_sends_sdo_upload_requests():
     assert others <= {0x80, 0x181, 0x182, 0x1C0} | {0x580 + n for n in (1, 2, 64)}
 
 
+def test_to_an_absent_node_the_driver_sends_upload_requests_then_one_sdo_abort():
+    """The only frame beyond reads: canopen ends the unanswered upload with an SDO abort
+    (0x80, code 0x05040000 "SDO protocol timed out"), which changes nothing in a drive."""
+    chan = f"absent-{uuid.uuid4().hex[:6]}"
+    monitor = can.Bus(interface="virtual", channel=chan)
+    drv = open_driver(f"can://virtual/{chan}?nodes=7")
+    with pytest.raises(TransportError, match=r"node 7 did not answer"):
+        drv.open()
+    drv.close()
+    frames = []
+    while (m := monitor.recv(0.05)) is not None:
+        frames.append(m)
+    monitor.shutdown()
+    assert {m.arbitration_id for m in frames} == {0x607}
+    assert [m.data[0] for m in frames][-1] == 0x80
+    assert all(m.data[0] == 0x40 for m in frames[:-1])
+    assert int.from_bytes(frames[-1].data[4:8], "little") == 0x05040000
+
+
 def test_sync_1_makes_the_capture_the_sync_producer():
     """With sync=1 the driver sends SYNC (with counter) at `period`; drives answer each SYNC."""
     chan = f"test-{uuid.uuid4().hex[:8]}"

@@ -6,11 +6,14 @@ The process handling and the checks every transport shares are in tests/_capture
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
 from test_can_driver import UDP_MULTICAST_NEEDS, udp_multicast_available
-from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, assert_complete_and_exact, assert_failed_with_one_line,
+from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, LOG, Server, assert_complete_and_exact, capture, assert_failed_with_one_line,
                             assert_recorded_all_but, assert_rejected_frames_are_dropped,
                             assert_sigkill_loses_at_most_one_second, reconnected_log, serve_and_capture, served_source)
 from _capture_procs import program, simulated  # noqa: F401  (module-scoped fixtures, requested by name)
@@ -58,3 +61,34 @@ def test_a_bus_that_stays_silent_ends_the_capture_with_one_line_and_a_complete_l
 
 def test_a_sigkilled_capture_leaves_a_log_missing_at_most_one_second(tmp_path):
     assert_sigkill_loses_at_most_one_second("can", tmp_path)
+
+
+LIBRARY_CAPTURE = """
+import sys
+from core.errors import TransportError
+from drivers.capture import capture
+try:
+    capture(sys.argv[1], "lib.mcap", progress=False)
+except TransportError as exc:
+    print(f"error: {exc}", file=sys.stderr)
+"""
+
+
+@pytest.mark.parametrize("caller", ["agent capture", "drivers.capture.capture"])
+def test_an_absent_canopen_node_is_exactly_one_line(tmp_path, program, caller):
+    """Node 1 answers its SDO uploads, node 9 is not on the bus: the one line says so, and
+    canopen's own log line about the transfer it aborted stays off the terminal."""
+    with Server(["-t", "can", str(program)], tmp_path) as srv:
+        port = srv.port.replace("nodes=1,2", "nodes=1,9")
+        assert "nodes=1,9" in port
+        if caller == "agent capture":
+            res = capture(["--port", port, "-o", LOG], tmp_path)
+        else:
+            res = subprocess.run([sys.executable, "-c", LIBRARY_CAPTURE, port], cwd=tmp_path,
+                                 capture_output=True, text=True, timeout=60)
+    assert res.stderr.splitlines() == [
+        "error: node 9 did not answer the SDO upload of its TPDO mapping (No SDO response received); "
+        "is it on the bus? (sdo=0 takes the mapping from the EDS instead)"], res.stderr
+    assert res.stdout == ""
+    assert res.returncode == (1 if caller == "agent capture" else 0)
+    assert not (tmp_path / LOG).exists() and not (tmp_path / "lib.mcap").exists()  # nothing was recorded

@@ -24,7 +24,7 @@ from drivers.base import Driver, Sample, StreamInfo
 from drivers.capture import capture
 from drivers.endpoints.serial_endpoint import SerialEndpoint
 from drivers.endpoints.source import FaultPlan, RealTimeSource, stream_info_for
-from core.reader import load_recording
+from core.reader import load_mcap, load_recording
 from core.recording import AxisTrace, Recording
 
 
@@ -174,6 +174,21 @@ def test_counter_gaps_are_counted_once_as_dropped_and_corrupt_frames_come_from_t
     assert [e["count"] for e in ev if e["kind"] == "segment"] == [0, 1]
     assert sum(e["count"] for e in ev if e["kind"] == "corrupt") == 3
     assert log.metadata["summary"]["dropped"] == 6 and log.metadata["dropped"] == 6
+
+
+def test_a_stream_whose_frames_are_nearly_all_rejected_ends_as_unusable_data(tmp_path):
+    """Every frame but the first and the last fails its CRC: the log must not pass as a
+    recording of 2 samples; it ends "unusable data" and says how many were rejected."""
+    rec = random_walk(400, axes="X")
+    with served(rec, faults=FaultPlan(corrupt_rate=1.0, seed=1)) as ep:
+        s = capture(ep.port_url(), tmp_path / "a.mcap", progress=False)
+    assert (s.received, s.corrupt, s.end) == (2, 398, "unusable data")
+    assert s.error == ("400 sample records arrived but only 2 could be recorded (stopped by: program ended): "
+                       "398 rejected by the integrity check (checksum, length or format)")
+    log = load_mcap(tmp_path / "a.mcap")
+    assert log.metadata["summary"]["end"] == "unusable data"
+    assert log.metadata["events"][-1] == {"kind": "end", "counter": 399, "count": 2,
+                                          "message": f"unusable data: {s.error}"}
 
 
 # -- stopping with signals, in a real capture process --------------------------------------

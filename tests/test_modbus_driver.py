@@ -68,8 +68,9 @@ def capture_all(url: str, limit_s: float = 10.0):
 
 
 def wire(values: np.ndarray, scale: float = SCALE) -> np.ndarray:
-    """What survives the register encoding: whole counts times the scale."""
-    return np.rint(values / scale).astype(np.int64) * scale
+    """What survives the register encoding: whole counts, as the exact decimal count x 10^-k
+    (count / 10^k, never count * 1e-6, which misses the decimal in a third of the cases)."""
+    return np.rint(values / scale) / round(1 / scale)
 
 
 def assert_exact(samples, src: RealTimeSource, cols=None, scale: float = SCALE) -> np.ndarray:
@@ -99,9 +100,22 @@ def test_trace_upload_over_tcp_gets_every_sample_exactly():
     assert drv.ended
     k = assert_exact(samples, src)
     assert k.tolist() == list(range(1500))
-    assert drv.stats.as_dict() == {"received": 1500, "dropped": 0, "corrupt": 0, "reconnects": 0}
+    assert drv.stats.as_dict() == {"received": 1500, "dropped": 0, "corrupt": 0, "reconnects": 0, "skipped": 0}
     assert drv.gaps == 0
     assert set(codes) == {3}  # reads of holding registers only
+
+
+def test_positions_are_the_exact_decimal_of_the_nanometre_counts():
+    """-2486899 counts at 1e-6 mm are -2.486899 mm, as CAN and serial give it: count / 10^6,
+    never count * 1e-6 = -2.4868989999999997 (which a third of all counts would become)."""
+    rec = random_walk(600, axes="X")
+    rec.axes["X"].commanded[:3] = [-2.486899, -2.486902, 1.2345]
+    with serving(rec, speed=4.0) as (ep, src):
+        drv, info, samples = capture_all(ep.port_url())
+    values = [v for s in samples for v in (*s.commanded, *s.actual)]
+    assert len(values) == 1200
+    assert [s.commanded[0] for s in samples[:3]] == [-2.486899, -2.486902, 1.2345]
+    assert all(len(repr(v).partition(".")[2]) <= 6 for v in values)  # the shortest repr is the decimal
 
 
 def test_trace_upload_over_an_rtu_pseudo_terminal_gets_every_sample_exactly():

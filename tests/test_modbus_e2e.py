@@ -11,16 +11,20 @@ The process handling and the checks every transport shares are in tests/_capture
 
 from __future__ import annotations
 
+import warnings
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, LOG, Server, assert_complete_and_exact,
+from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, LOG, Server, assert_complete_and_exact, capture,
                             assert_failed_with_one_line, assert_recorded_all_but,
                             assert_sigkill_loses_at_most_one_second, assert_values_exact, injected_faults,
                             read_fault_log, serve_and_capture, start_capture, wait_for_size)
 from _capture_procs import program, simulated  # noqa: F401  (module-scoped fixtures, requested by name)
 from virtual_cnc.machine_run import simulate as run_programs
-from core.reader import load_recording
+from core.reader import load_mcap, load_recording
+from drivers.modbus_map import default_map
 
 pytestmark = pytest.mark.slow
 
@@ -28,7 +32,8 @@ SCALE = 1e-6  # mm per count of the default register map
 
 
 def wire(values: np.ndarray) -> np.ndarray:
-    return np.rint(values / SCALE).astype(np.int64) * SCALE
+    """Whole nanometre counts as the exact decimal: count / 10^6 mm."""
+    return np.rint(values / SCALE) / 10**6
 
 
 @pytest.mark.parametrize("link", ["tcp", "rtu"])
@@ -103,3 +108,70 @@ def test_a_controller_gone_for_good_ends_with_one_line_and_a_complete_log(tmp_pa
 
 def test_a_sigkilled_capture_leaves_a_log_missing_at_most_one_second(tmp_path):
     assert_sigkill_loses_at_most_one_second("modbus", tmp_path, wire)
+
+
+# -- a map that does not fit the controller ------------------------------------------------------
+
+def _write_map(path, axes, word_order="big", axis_word_order=None):
+    """A register map TOML of the default layout: 32-bit values in ``word_order``, the axis
+    positions in ``axis_word_order`` (default: the same)."""
+    rmap = default_map(axes, word_order=word_order)
+    if axis_word_order:
+        rmap = replace(rmap, axes=tuple(replace(a, word_order=axis_word_order) for a in rmap.axes))
+    path.write_text(rmap.to_toml())
+    return path
+
+
+@pytest.mark.parametrize("capture_map", ["map file", "default layout"])
+def test_a_controller_writing_the_other_word_order_ends_with_one_line_naming_it(tmp_path, program, capture_map):
+    """The peer writes every 32-bit value low word first; the capture reads high word first.
+    No trace record holds its counter: the capture must not end as an empty success."""
+    served = _write_map(tmp_path / "served.toml", ["X", "Y"], word_order="little")
+    with Server(["-t", "modbus", str(program), "--opt", f"map={served}"], tmp_path) as srv:
+        if capture_map == "map file":
+            port = srv.port.replace(f"map={served}", f"map={_write_map(tmp_path / 'mine.toml', ['X', 'Y'])}")
+        else:
+            port = srv.port.replace(f"&map={served}", "")
+        res = capture(["--port", port, "-o", LOG], tmp_path, timeout=60)
+    assert res.returncode == 1, res.stderr
+    errors = [ln for ln in res.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "none holding its counter" in errors[0]
+    assert 'the controller writes 32-bit values low word first; set word_order = "little"' in errors[0]
+    assert ("mine.toml" in errors[0]) == (capture_map == "map file")
+    # the log is complete (closed normally), empty, and says why
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        log = load_mcap(tmp_path / LOG)
+    s = log.metadata["summary"]
+    assert (s["received"], s["end"]) == (0, "unusable data")
+    assert 'set word_order = "little"' in s["error"]
+    end = log.metadata["events"][-1]
+    assert end["kind"] == "end" and end["message"] == f"unusable data: {s['error']}"
+
+
+def test_axis_positions_in_the_other_word_order_are_warned_about_once_per_axis(tmp_path, program, simulated):
+    """Counters fit (so every sample is recorded) but the axis positions are written low word
+    first: the values are garbage that jumps by tens of mm per sample, which is named."""
+    served = _write_map(tmp_path / "served.toml", ["X", "Y"], axis_word_order="little")
+    mine = _write_map(tmp_path / "mine.toml", ["X", "Y"])
+    with Server(["-t", "modbus", str(program), "--opt", f"map={served}"], tmp_path) as srv:
+        res = capture(["--port", srv.port.replace(f"map={served}", f"map={mine}"), "-o", LOG], tmp_path)
+    assert res.returncode == 0, res.stderr
+    warned = [ln for ln in res.stderr.splitlines() if ln.startswith("warning:")]
+    assert [w.split()[2] for w in warned] == ["X", "Y"], res.stderr
+    assert all("faster than any feed drive" in w and f"word_order and scale_mm of axis {w.split()[2]}" in w
+               for w in warned)
+    log = load_recording(tmp_path / LOG)
+    assert log.n_samples == simulated.n_samples
+    assert [e["kind"] for e in log.metadata["events"]].count("warning") == 2
+    assert len(log.metadata["summary"]["warnings"]) == 2
+
+
+def test_the_right_map_gives_no_plausibility_warning(tmp_path, program, simulated):
+    """The same run with maps that agree: not a single warning (the check must not cry wolf on rapids)."""
+    served = _write_map(tmp_path / "served.toml", ["X", "Y"], word_order="little")
+    with Server(["-t", "modbus", str(program), "--opt", f"map={served}"], tmp_path) as srv:
+        res = capture(["--port", srv.port, "-o", LOG], tmp_path)
+    assert res.returncode == 0 and "warning" not in res.stderr, res.stderr
+    assert_complete_and_exact(res, tmp_path, simulated, wire)

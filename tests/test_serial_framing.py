@@ -108,6 +108,44 @@ def test_ascii_line_layout_is_the_documented_one():
     assert line[line.index(b"*") + 1:-2] == b"%02X" % x
 
 
+def _binary_frame(ftype: bytes, payload: bytes) -> bytes:
+    """A frame built from docs/serial-protocol.md alone: sync, type, length, payload, CRC-32."""
+    body = ftype + len(payload).to_bytes(2, "little") + payload
+    return b"\xa5\x5a" + body + zlib.crc32(body).to_bytes(4, "little")
+
+
+def _info_payload(meta: dict, period_ns: int = 1_000_000, cpm: int = 10_000) -> bytes:
+    import json
+    return (0).to_bytes(4, "little") + period_ns.to_bytes(4, "little") + cpm.to_bytes(4, "little") + \
+        json.dumps(meta).encode()
+
+
+def test_binary_flags_and_reserved_are_ignored_whatever_their_value():
+    codec = BinaryCodec()
+    sample = (5).to_bytes(4, "little") + (0).to_bytes(2, "little") + bytes([1, 0xA7]) + \
+        (15_000).to_bytes(4, "little", signed=True) + (-3).to_bytes(4, "little", signed=True)
+    end = (9).to_bytes(4, "little") + (0xDEADBEEF).to_bytes(4, "little")
+    frames = codec.feed(_binary_frame(b"S", sample) + _binary_frame(b"E", end))
+    assert frames == [SampleFrame(5, 0, (15_000,), (-3,)), EndFrame(9)] and codec.corrupt == 0
+
+
+def test_binary_info_needs_axes_period_and_scale_and_nothing_else():
+    good = _binary_frame(b"I", _info_payload({"axes": ["X"]}))
+    assert BinaryCodec().feed(good) == [InfoFrame(0, 1_000_000, 10_000, ("X",), (), "", ())]
+    for bad in (_info_payload({"units": ["mm"]}), _info_payload({"axes": []}),
+                _info_payload({"axes": ["X"]}, period_ns=0), _info_payload({"axes": ["X"]}, cpm=0)):
+        codec = BinaryCodec()
+        assert codec.feed(good + _binary_frame(b"I", bad)) == [InfoFrame(0, 1_000_000, 10_000, ("X",), (), "", ())]
+        assert codec.corrupt == 1  # rejected like a damaged frame
+
+
+def test_ascii_text_fields_decode_every_percent_escape():
+    line = _line("I,0,1000000,10000,X,,50%25 load%2C %C2%B5m,a%3Ab.nc:" + "ab" * 32)
+    (info,) = AsciiCodec().feed(line)
+    assert info.controller == "50% load, µm" and info.programs[0]["name"] == "a:b.nc"
+    assert info.units == ()
+
+
 @pytest.mark.parametrize("cls", CODECS)
 def test_resynchronises_after_random_garbage_without_inventing_frames(cls):
     rng = random.Random(11)

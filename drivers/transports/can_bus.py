@@ -46,6 +46,7 @@ is corrupt (counted, never decoded).
 from __future__ import annotations
 
 import collections
+import logging
 import socket
 import threading
 import time
@@ -58,6 +59,13 @@ from core.errors import InputError, TransportError, TransportTimeout
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.transports import canopen_map as com
 from drivers.transports.can_ticks import CounterUnwrapper, TickAssembler
+
+# A library's loggers report to the application's handlers only: without one, Python's
+# last-resort handler would print canopen's own "Transfer aborted by client ..." next to
+# the one-line error this driver raises for the same failure (an absent node).  The agent
+# CLI shows them with RAPID_IDENT_DEBUG=1.
+for _name in ("canopen", "can", "cantools"):
+    logging.getLogger(_name).addHandler(logging.NullHandler())
 
 __all__ = ["CanDriver", "DEFAULT_SCALE", "DEFAULT_AXES", "explain_bus_error"]
 
@@ -389,6 +397,7 @@ class CanDriver(Driver):
                     self.ended = True
                     break
         self.stats.received += len(out)
+        self.stats.skipped = asm.incomplete_ticks  # ticks whose PDOs did not all arrive
         # stats.dropped stays 0: every lost tick shows as a counter gap, which the capture
         # loop counts (drivers/capture.py); asm.lost_ticks holds the same number here.
         if not out and not self.ended:
@@ -410,6 +419,13 @@ class CanDriver(Driver):
                 self._bus.shutdown()
             finally:
                 self._bus = None
+
+    def unusable_reason(self) -> str:
+        return ("ticks that did not bring a position frame from every axis; check nodes= (or the DBC) "
+                "against the ids the drives send with")
+
+    def position_hint(self, axis: str) -> str:
+        return f"the scale= of axis {axis} (increments per mm) or its DBC factor"
 
     def _close(self) -> None:
         self._sync_stop.set()

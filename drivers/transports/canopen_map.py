@@ -9,7 +9,8 @@ frame at 1 kHz x n axes is one ``struct.unpack``.
 Objects used:
 
 * 0x6062:00 position demand value, 0x6064:00 position actual value (INTEGER32,
-  increments; mm = increments x scale) - both in one synchronous TPDO per axis node;
+  increments; mm = increments / scale, scale in increments per mm) - both in one
+  synchronous TPDO per axis node;
 * 0x1005 COB-ID SYNC, 0x1006 communication cycle period (us) = the sample period,
   0x1019 synchronous counter overflow value (the SYNC counter runs 1..overflow);
 * 0x2100:01 segment, 0x2100:02 program state (0 idle, 1 running, 2 ended) of the

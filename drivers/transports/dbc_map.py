@@ -23,6 +23,7 @@ from pathlib import Path
 import cantools
 
 from core.errors import InputError
+from drivers.scaling import counts_per_unit
 
 __all__ = ["DbcPart", "DbcLayout", "load_dbc", "per_mm", "DEFAULT_DBC"]
 
@@ -31,13 +32,8 @@ _AXIS_SIGNAL = re.compile(r"^(?P<axis>[A-Za-z][A-Za-z0-9]*)_(?P<kind>commanded|a
 
 
 def per_mm(factor: float) -> float:
-    """Increments per mm of a DBC factor (mm per bit), an exact integer when it is one (0.0001 -> 10000).
-
-    Positions are computed as raw / per_mm, so 12345 at 0.0001 mm/bit is 1.2345 (not
-    12345 x 0.0001 = 1.2345000000000002) - the same number the other transports give.
-    """
-    inv = round(1.0 / factor)
-    return float(inv) if inv > 0 and abs(inv * factor - 1.0) < 1e-12 else 1.0 / factor
+    """Increments per mm of a DBC factor (mm per bit): positions are raw / per_mm (drivers.scaling)."""
+    return counts_per_unit(factor)
 
 
 @dataclass(frozen=True)

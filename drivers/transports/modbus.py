@@ -49,6 +49,10 @@ register map does not fit the controller and end the capture with a one-line
 TransportError.  A lost connection (TCP closed, or RTU silent for several timeouts) is
 re-established with exponential backoff (50 ms doubling to 1 s); each recovery counts in
 ``stats.reconnects``; after ``reconnect_s`` without success a TransportError says so.
+Trace records that hold none of their counters from the start of the capture (the first
+:data:`MISMATCH_LIMIT` written ones) mean the map does not fit the controller: a
+:class:`~core.errors.StreamError` names the word order to set when the records fit the
+other one, else the trace fields to check.
 """
 
 from __future__ import annotations
@@ -64,7 +68,7 @@ from pymodbus.exceptions import ConnectionException, ModbusException
 from pymodbus.framer import FramerType
 from pymodbus.framer.rtu import FramerRTU
 
-from core.errors import InputError, MachineError, TransportError
+from core.errors import InputError, MachineError, StreamError, TransportError
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.modbus_map import (
     STATUS_ENDED,
@@ -75,6 +79,7 @@ from drivers.modbus_map import (
     load_map,
     plan_reads,
 )
+from drivers.scaling import counts_per_unit
 from drivers.url import PortURL
 
 __all__ = ["ModbusDriver", "ALLOWED_FUNCTION_CODES", "ReadOnlyViolation"]
@@ -88,6 +93,9 @@ ALLOWED_FUNCTION_CODES = frozenset({1, 2, 3, 4})
 _EXC_NAMES = {1: "illegal function", 2: "illegal data address", 3: "illegal data value",
               4: "server device failure", 5: "acknowledge", 6: "server device busy",
               8: "memory parity error", 10: "gateway path unavailable", 11: "gateway target failed to respond"}
+#: written trace records read from the start of a capture, none holding its counter, after which
+#: the map cannot fit the controller (a controller that drops ticks still writes most of them)
+MISMATCH_LIMIT = 32
 _CORRUPT_EXC = {4, 8}  # the data could not be delivered intact this time: retry
 _BUSY_EXC = {5, 6}
 
@@ -145,6 +153,8 @@ class ModbusDriver(Driver):
         self._next: int | None = None  # trace: unwrapped counter of the next record to read
         self._last_live: int | None = None  # live: unwrapped counter of the last sample seen
         self._deferred_error: TransportError | None = None
+        self._matched_any = False  # some trace record held its counter: the layout fits
+        self._unmatched: list[tuple[np.ndarray, np.ndarray]] = []  # (counters, records) read before a match
 
     # -- connection ---------------------------------------------------------------------------
     def _make_client(self):
@@ -335,7 +345,7 @@ class ModbusDriver(Driver):
             raise InputError.about("axes", f"the controller has no axis {unknown[0]!r} (axes: {', '.join(names)})")
         # Every axis is decoded; the capture loop keeps the --axes it wants.
         self._cols = list(range(len(names)))
-        self._scale = np.array([rmap.axes[i].scale_mm for i in self._cols])
+        self._per_unit = np.array([counts_per_unit(rmap.axes[i].scale_mm) for i in self._cols])
         self.period = period
         self._prepare_decoders(rmap)
         extra = {"transport": self.url.scheme, "mode": self.mode, "unit": rmap.unit,
@@ -466,25 +476,88 @@ class ModbusDriver(Driver):
         """Trace records read for counters ``c0, c0+1, ...`` (uint16, shape (k, record_words)) -> Samples.
 
         A record whose own counter is not the expected one (stale or overwritten slot) is
-        skipped and counted in :attr:`gaps`.  Positions: ``count * scale_mm``.
+        skipped and counted in :attr:`gaps` and ``stats.skipped``; if the first
+        :data:`MISMATCH_LIMIT` records of the capture all are, the map does not fit the
+        controller and a :class:`StreamError` says which field to check.  Positions:
+        ``count / counts_per_unit(scale_mm)`` (drivers.scaling).
         """
         k = rec.shape[0]
         expect = np.arange(c0, c0 + k)
         got = decode_u32(rec[:, 0], rec[:, 1], self.rmap.word_order, signed=False)
         ok = got == (expect & 0xFFFFFFFF)
         self.gaps += int(k - ok.sum())  # stale (never written) or already overwritten slots
+        self.stats.skipped += int(k - ok.sum())
+        if not self._matched_any:
+            if ok.any():
+                self._matched_any = True
+                self._unmatched.clear()
+            else:
+                # Evidence of a map that does not fit is a record that does not belong in its
+                # slot at all: an empty slot (0, a ring read beyond what was written, as a
+                # misread head makes the driver do), a stale one (counter - k x capacity: the
+                # controller skipped that tick) or one lapped since the head was read
+                # (counter + k x capacity) are what a fitting map also reads.
+                foreign = (got != 0) & ~self._in_own_slot(got, expect)
+                self._unmatched.append((expect[foreign], rec[foreign]))
+                n = sum(len(e) for e, _ in self._unmatched)
+                if n >= MISMATCH_LIMIT:
+                    raise StreamError(f"{self.url.raw}: {n} trace records read, none holding "
+                                      f"its counter: {self.unusable_reason()}")
         if not ok.any():
             return []
         rec = rec[ok]
         counters = expect[ok]
         seg = rec[:, 2].astype(np.int64)
         cmd = np.column_stack([decode_u32(rec[:, a], rec[:, a + 1], o, True)
-                               for (a, _), o in zip(self._rec_cols, self._orders)]) * self._scale
+                               for (a, _), o in zip(self._rec_cols, self._orders)]) / self._per_unit
         act = np.column_stack([decode_u32(rec[:, b], rec[:, b + 1], o, True)
-                               for (_, b), o in zip(self._rec_cols, self._orders)]) * self._scale
+                               for (_, b), o in zip(self._rec_cols, self._orders)]) / self._per_unit
         T = self.period
         return [Sample(cnt, cnt * T, tuple(cm), tuple(ac), sg)
                 for cnt, sg, cm, ac in zip(counters.tolist(), seg.tolist(), cmd.tolist(), act.tolist())]
+
+    def _in_own_slot(self, got: np.ndarray, expect: np.ndarray) -> np.ndarray:
+        """Whether each 32-bit counter ``got`` belongs in the slot of ``expect`` (differs by whole rings)."""
+        d = (got.astype(np.int64) - expect) % (1 << 32)
+        return (d % self.capacity == 0) | (((1 << 32) - d) % self.capacity == 0)
+
+    def unusable_reason(self) -> str:
+        if self._matched_any or not self._unmatched:
+            return "trace slots did not hold the counters expected in them (ticks the controller did not write)"
+        expect = np.concatenate([e for e, _ in self._unmatched])
+        if not len(expect):
+            return "the trace slots read were empty or held older records; the head register may be misread"
+        return self._explain_mismatch(expect, np.concatenate([r for _, r in self._unmatched]))
+
+    def _explain_mismatch(self, expect: np.ndarray, rec: np.ndarray) -> str:
+        """Why trace records read from slots ``expect % capacity`` hold none of their counters.
+
+        The slot a record was read from is known whatever the head said, so a record of
+        counter c written low word first (or high word first) shows by sitting in slot
+        c mod capacity once decoded in the other word order.
+        """
+        rmap = self.rmap
+        assert rmap is not None and rmap.trace is not None
+        where = (f"in [device] of register map {rmap.source}" if rmap.source != "default"
+                 else "in a register map (map=FILE.toml; the default layout is high word first)")
+        slots = expect % self.capacity
+        other = "little" if rmap.word_order == "big" else "big"
+        got = decode_u32(rec[:, 0], rec[:, 1], rmap.word_order, signed=False)
+        alt = decode_u32(rec[:, 0], rec[:, 1], other, signed=False)
+        if np.all(alt % self.capacity == slots):
+            i = 0
+            first = "low" if other == "little" else "high"
+            return (f"they do in \"{other}\" word order (slot {int(slots[i])} holds counter {int(alt[i])}, "
+                    f"not {int(got[i])}): the controller writes 32-bit values {first} word first; "
+                    f"set word_order = \"{other}\" {where}")
+        return (f"slot {int(slots[0])} holds {int(got[0])} where counter {int(expect[0])} was expected: "
+                f"trace.base = {rmap.trace.base}, the capacity register ({self.capacity} slots), "
+                f"device.word_order = \"{rmap.word_order}\" or the record layout of register map "
+                f"{rmap.source} do not match the controller (docs/modbus.md, Trace record)")
+
+    def position_hint(self, axis: str) -> str:
+        src = self.rmap.source if self.rmap is not None else "default"
+        return f"word_order and scale_mm of axis {axis} in register map {src}"
 
     # -- live mode -----------------------------------------------------------------------------
     def _read_live(self, timeout: float) -> list[Sample]:
@@ -516,10 +589,10 @@ class ModbusDriver(Driver):
                     if self._last_live is not None:
                         self.gaps += counter - self._last_live - 1
                     self._last_live = counter
-                    cmd = [float(int(decode_u32(regs[j], regs[j + 1], o, True)) * s)
-                           for j, o, s in zip(i_cmd, self._orders, self._scale)]
-                    act = [float(int(decode_u32(regs[j], regs[j + 1], o, True)) * s)
-                           for j, o, s in zip(i_act, self._orders, self._scale)]
+                    cmd = [int(decode_u32(regs[j], regs[j + 1], o, True)) / float(n)
+                           for j, o, n in zip(i_cmd, self._orders, self._per_unit)]
+                    act = [int(decode_u32(regs[j], regs[j + 1], o, True)) / float(n)
+                           for j, o, n in zip(i_act, self._orders, self._per_unit)]
                     seg = int(regs[i_seg]) if i_seg is not None else 0
                     out.append(Sample(counter, counter * T, tuple(cmd), tuple(act), seg))
                     self.stats.received += 1

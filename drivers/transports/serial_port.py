@@ -36,7 +36,7 @@ import time
 
 import serial
 
-from core.errors import InputError, TransportError, TransportTimeout
+from core.errors import InputError, StreamError, TransportError, TransportTimeout
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.transports.serial_framing import EndFrame, InfoFrame, SampleFrame, codec_for
 from drivers.url import PortURL
@@ -203,7 +203,7 @@ class SerialDriver(Driver):
             self._pending.clear()
             return
         if (fr.axes, fr.period_ns, fr.counts_per_mm) != (old.axes, old.period_ns, old.counts_per_mm):
-            raise TransportError(
+            raise StreamError(
                 f"serial port {self.path}: the controller changed its stream mid-capture "
                 f"(axes {','.join(old.axes)} -> {','.join(fr.axes)}, period {old.period_ns} -> {fr.period_ns} ns, "
                 f"scale {old.counts_per_mm} -> {fr.counts_per_mm} counts/mm); start a new capture")
