@@ -33,6 +33,8 @@ def generate(
     toolpath: str | None = None,
     size: float = 20.0,
     blending: bool = False,
+    direction: str = "ccw",
+    start_deg: float = 0.0,
 ) -> list[Toolpath]:
     """The identification set (low- then high-speed program) or one validation contour.
 
@@ -49,6 +51,9 @@ def generate(
     toolpath : ``circle`` or ``diamond`` for a validation contour instead.
     size : contour size, mm (circle diameter; diamond vertex to vertex).
     blending : path blending (G64) instead of exact stop.
+    direction : a contour's sense, ``ccw``, ``cw`` or ``both`` (two programs, ``<toolpath>_ccw`` and
+        ``<toolpath>_cw``: the ballbar test's pair).
+    start_deg : where a circle starts and ends, degrees from the first axis (45 for a ballbar test).
     """
     centers = [float(c) for c in center]
     if toolpath is not None:
@@ -58,7 +63,12 @@ def generate(
         ax = [a.upper() for a in (axes or ("X", "Y"))]
         if len(centers) == 1:
             centers = centers * 2
-        programs = [TOOLPATHS[kind](size=size, feed=feed, center=centers, axes=ax)]
+        senses = ("ccw", "cw") if direction == "both" else (direction,)
+        if any(d not in ("ccw", "cw") for d in senses):
+            raise InputError.about("direction", f"direction {direction!r}: ccw, cw or both")
+        extra = {"start_deg": start_deg} if kind == "circle" else {}
+        programs = [TOOLPATHS[kind](size=size, feed=feed, center=centers, axes=ax, direction=d,
+                                    name=f"{kind}_{d}" if len(senses) > 1 else kind, **extra) for d in senses]
     else:
         ax = [a.upper() for a in (axes or ("X",))]
         if len(centers) not in (1, len(ax)):

@@ -83,3 +83,23 @@ def test_agent_ballbar_prints_the_reading_and_writes_a_self_contained_report(tmp
     assert math.isclose(out["tests"][0]["radius_mm"], 100.0)
     bad = CliRunner().invoke(cli.app, ["ballbar", "--machine", str(result), "--axes", "X,Z"])
     assert bad.exit_code == 2 and bad.output.startswith("error:") and len(bad.output.strip().splitlines()) == 1
+
+
+def test_generated_ballbar_programs_recorded_on_the_drives_overlay_the_prediction(tmp_path, mismatched):
+    """agent generate writes the test's pair; their recordings read like the prediction."""
+    def run(*args):
+        res = CliRunner().invoke(cli.app, [str(a) for a in args])
+        assert res.exit_code == 0, res.output
+        return res.output
+
+    run("generate", "--toolpath", "circle", "--size", 2 * R, "--feed", V, "--direction", "both",
+        "--start-angle", 45, "--dialect", "linuxcnc", "-o", tmp_path)
+    for d in ("ccw", "cw"):
+        run("simulate", tmp_path / f"circle_{d}.ngc", "--machine", mismatched, "-o", tmp_path / f"{d}.mcap")
+    vm = identified_machine(mismatched)
+    test = run_ballbar(vm, radius=R, feed=V, against=[ident.load(tmp_path / f"{d}.mcap") for d in ("ccw", "cw")])
+    assert test.measured is not None
+    assert test.measured.servo_mismatch_ms == pytest.approx(test.result.servo_mismatch_ms, rel=0.05)
+    for got, want in zip(test.result.runs, test.measured.runs):
+        assert got.direction == want.direction
+        assert got.circularity_um == pytest.approx(want.circularity_um, rel=0.05)

@@ -4,6 +4,9 @@ models predicts the tracking and contour errors the machine itself shows."""
 from __future__ import annotations
 
 import json
+import shutil
+import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -191,3 +194,21 @@ def test_the_documented_example_runs(tmp_path, monkeypatch):
         exec(compile(code, str(doc), "exec"), namespace)
     assert abs(namespace["c"].max_ratio - 1) < 0.05
     assert namespace["test"].result.runs and namespace["summary"].worst
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (shutil.which("chromium") or shutil.which("chromium-browser")),
+                    reason="headless Chromium not installed (apt-get install chromium)")
+def test_the_report_renders_in_a_headless_browser(files, tmp_path):
+    report, shot = tmp_path / "p.html", tmp_path / "p.png"
+    assert invoke("predict", files / "circle.ngc", "--machine", files / "result.json", "--report", report).exit_code == 0
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.run(["bash", str(root / "scripts" / "screenshot.sh"), str(report), str(shot)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    from matplotlib.image import imread
+
+    img = imread(shot)
+    assert img.shape[0] > 1000 and img.shape[1] > 1000
+    # the figures are there: far more than a blank page's one colour
+    assert len(np.unique((img[..., :3] * 255).astype(np.uint8).reshape(-1, 3), axis=0)) > 50

@@ -46,8 +46,10 @@ def generate(
     seed: int = typer.Option(1, "--seed", help="Random seed; the same seed gives the same programs."),
     distribution: str = typer.Option("uniform", "--distribution", help="High-speed targets: uniform (thesis Table 3.2) or loguniform step lengths."),
     dialect: str = typer.Option("iso", "--dialect", help="iso, heidenhain or linuxcnc."),
-    toolpath: Optional[str] = typer.Option(None, "--toolpath", help="Write a validation contour instead: circle or diamond."),
+    toolpath: Optional[str] = typer.Option(None, "--toolpath", help="Write a validation contour instead: circle or diamond (with --direction both --start-angle 45: the ballbar pair)."),
     size: float = typer.Option(20.0, "--size", help="Contour size, mm (circle diameter; diamond vertex-to-vertex)."),
+    direction: str = typer.Option("ccw", "--direction", help="Contour sense: ccw, cw, or both (two programs: the ballbar test's pair)."),
+    start_angle: float = typer.Option(0.0, "--start-angle", help="Where a circle starts and ends, degrees from the first axis (45 for a ballbar test)."),
     blending: bool = typer.Option(False, "--blending", help="Write path blending (G64 P0.01) instead of exact stop (G61; G61.1 in LinuxCNC)."),
     out: Path = typer.Option(Path("."), "-o", "--out", help="Output directory (created if missing)."),
 ) -> None:
@@ -64,7 +66,7 @@ def generate(
     programs = make_programs(
         _axes(axes or default_axes), center=_floats(center, "--center"), range_mm=range_mm,
         low_step=low_step, n_low=n_low, n_high=n_high, feed=feed, seed=seed, distribution=distribution,
-        toolpath=toolpath, size=size, blending=blending,
+        toolpath=toolpath, size=size, blending=blending, direction=direction.strip().lower(), start_deg=start_angle,
     )
     for path in save_programs(programs, dialect, out):
         print(path)
