@@ -13,7 +13,9 @@ pin true while a program runs; default ``halui.program.is-running``; ``running=`
 none), ``end_idle`` (s the running pin must stay false after a program before the capture
 ends; default 1.0, long enough for the gap between two programs run back to back),
 ``thread`` (default ``servo-thread``), ``depth`` (FIFO depth in samples, default 60000),
-``scale`` (machine units → mm; default 1, 25.4 for an inch machine).
+``scale`` (machine units → mm; default 1, 25.4 for an inch machine), ``channel`` (use FIFO N
+of a ``sampler`` the HAL already loaded — only one sampler module can be loaded — instead
+of loading one; its columns must be unlinked and typed as below).
 
 It runs on the computer that runs LinuxCNC.  On open it loads LinuxCNC's ``sampler``
 with one FIFO whose columns are each joint's commanded and actual position, the running
@@ -57,7 +59,7 @@ class LinuxCNCDriver(Driver):
 
     schemes = ("linuxcnc",)
     options = {"joints": str, "axes": str, "cmd": str, "fb": str, "running": str, "end_idle": float,
-               "thread": str, "depth": int, "scale": float}
+               "thread": str, "depth": int, "scale": float, "channel": int}
 
     def __init__(self, url: PortURL, axes: list[str] | None = None) -> None:
         super().__init__(url, axes)
@@ -88,6 +90,10 @@ class LinuxCNCDriver(Driver):
         self.thread = url.option("thread", str, "servo-thread")
         self.depth = url.option("depth", int, 60000)
         self.scale = url.option("scale", float, 1.0)
+        self.channel = url.option("channel", int, None)
+        if self.channel is not None and not 0 <= self.channel < 16:
+            raise InputError.about("port", f"{url.raw}: channel must be a sampler FIFO number 0..15")
+        self._ch = self.channel or 0
         if self.depth < 100 or not self.end_idle >= 0 or not self.scale > 0:
             raise InputError.about("port", f"{url.raw}: need depth >= 100, end_idle >= 0 and scale > 0")
         self._user: pwd.struct_passwd | None = None
@@ -96,8 +102,6 @@ class LinuxCNCDriver(Driver):
         self._added: list[str] = []  # teardown steps done so far, in order
         self._own_signals: list[str] = []
         self._period = 0.0
-        self._segment = 0
-        self._running = False
         self._seen_running = False
         self._idle_samples = 0
 
@@ -137,10 +141,15 @@ class LinuxCNCDriver(Driver):
             self._user = pwd.getpwuid(owner)
         self._period = self._thread_period()
         pins = self._check_pins()
-        if "sampler" in self._hal("list", "comp").split():
-            raise TransportError("HAL already has a sampler component loaded (only one can be); "
-                                 "unload it (halcmd unloadrt sampler) and capture again")
         cfg = "ff" * len(self.joints) + ("b" if self.running_pin else "") + "s"
+        loaded = "sampler" in self._hal("list", "comp").split()
+        if loaded and self.channel is None:
+            raise TransportError("HAL already has a sampler component loaded (only one can be); unload it "
+                                 "(halcmd unloadrt sampler) or give a free FIFO of it with channel=N")
+        if self.channel is not None:
+            if not loaded:
+                raise InputError.about("port", f"{self.url.raw}: channel= needs a loaded sampler; HAL has none")
+            self._check_channel(cfg)
         try:
             self._setup(pins, cfg)
         except BaseException:
@@ -184,24 +193,44 @@ class LinuxCNCDriver(Driver):
             out.append((name, kind, direction, sig))
         return out
 
+    def _check_channel(self, cfg: str) -> None:
+        """An existing FIFO must have exactly our column types, all unlinked."""
+        types = {"float": "f", "bit": "b", "s32": "s"}
+        have = []
+        for col in range(len(cfg) + 1):
+            info = self._pin(f"sampler.{self._ch}.pin.{col}")
+            if info is None:
+                break
+            if info[2]:
+                raise TransportError(f"sampler.{self._ch}.pin.{col} is already linked to {info[2]!r}; "
+                                     "give a free channel=")
+            have.append(types.get(info[0], "?"))
+        if "".join(have) != cfg:
+            raise InputError.about("port", f"{self.url.raw}: sampler FIFO {self._ch} has columns "
+                                   f"{''.join(have) or 'none'}; this capture needs cfg={cfg}")
+
     def _setup(self, pins: list[tuple[str, str, str, str]], cfg: str) -> None:
-        self._hal("loadrt", "sampler", f"depth={self.depth}", f"cfg={cfg}")
-        self._added.append("module")
+        ch = f"sampler.{self._ch}"
+        if self.channel is None:
+            self._hal("loadrt", "sampler", f"depth={self.depth}", f"cfg={cfg}")
+            self._added.append("module")
+        self._added.append("links")
         for col, (name, _, _, sig) in enumerate(pins):
             if not sig:
-                sig = f"{_PREFIX}{col}"
+                sig = f"{_PREFIX}{self._ch}-{col}"
                 self._hal("net", sig, name)
                 self._own_signals.append(sig)
-            self._hal("net", sig, f"sampler.0.pin.{col}")
-        overruns = f"{_PREFIX}overruns"
-        self._hal("net", overruns, "sampler.0.overruns", f"sampler.0.pin.{len(pins)}")
+            self._hal("net", sig, f"{ch}.pin.{col}")
+        overruns = f"{_PREFIX}{self._ch}-overruns"
         self._own_signals.append(overruns)
-        self._proc = subprocess.Popen(["halsampler", "-c", "0", "-t"], stdout=subprocess.PIPE,
+        self._hal("net", overruns, f"{ch}.overruns", f"{ch}.pin.{len(pins)}")
+        self._proc = subprocess.Popen(["halsampler", "-c", str(self._ch), "-t"], stdout=subprocess.PIPE,
                                       stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, cwd="/",
                                       **self._child_kwargs())
         os.set_blocking(self._proc.stdout.fileno(), False)
-        self._hal("addf", "sampler.0", self.thread)
-        self._added.append("function")
+        if not any(ch in line.split()[5:] for line in self._hal("show", "thread").splitlines()):
+            self._hal("addf", ch, self.thread)
+            self._added.append("function")
 
     # -- reading ---------------------------------------------------------------------------
     def _read(self, timeout: float) -> list[Sample]:
@@ -228,15 +257,16 @@ class LinuxCNCDriver(Driver):
                 self._track_program(f[1 + 2 * n] == b"1")
             self.stats.received += 1
             out.append(Sample(counter=counter, t_s=counter * self._period, commanded=tuple(v[0::2]),
-                              actual=tuple(v[1::2]), segment=self._segment))
+                              actual=tuple(v[1::2])))
         return out
 
     def _track_program(self, running: bool) -> None:
-        """Segments count program starts; the end is ``end_idle`` s without a program after one."""
-        if running and not self._running:
-            self._segment += 1
-            self._seen_running = True
-        self._running = running
+        """The end: ``end_idle`` s without a program after one ran.
+
+        One segment throughout: the servo loop runs on between programs (its integrator
+        too), so the recording is one continuous run with nothing to split.
+        """
+        self._seen_running = self._seen_running or running
         self._idle_samples = 0 if running else self._idle_samples + 1
         if self._seen_running and self._idle_samples * self._period >= self.end_idle:
             self.ended = True
@@ -247,8 +277,9 @@ class LinuxCNCDriver(Driver):
 
     def _teardown(self) -> None:
         """Undo what _setup did, in reverse; keeps going past errors (LinuxCNC may be gone)."""
+        ch = f"sampler.{self._ch}"
         if "function" in self._added:
-            self._hal("delf", "sampler.0", self.thread, check=False)
+            self._hal("delf", ch, self.thread, check=False)
         if self._proc is not None:
             if self._proc.poll() is None:
                 self._proc.send_signal(signal.SIGTERM)
@@ -260,12 +291,13 @@ class LinuxCNCDriver(Driver):
             self._proc.stdout.close()
             self._proc.stderr.close()
             self._proc = None
-        if "module" in self._added:
+        if "links" in self._added:
             for col in range(2 * len(self.joints) + 2):
-                self._hal("unlinkp", f"sampler.0.pin.{col}", check=False)
-            self._hal("unlinkp", "sampler.0.overruns", check=False)
+                self._hal("unlinkp", f"{ch}.pin.{col}", check=False)
+            self._hal("unlinkp", f"{ch}.overruns", check=False)
             for sig in self._own_signals:
                 self._hal("delsig", sig, check=False)
+        if "module" in self._added:
             self._hal("unloadrt", "sampler", check=False)
         self._added.clear()
         self._own_signals.clear()
