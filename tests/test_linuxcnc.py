@@ -150,23 +150,59 @@ def test_capture_is_passive_the_netlist_is_unchanged(tmp_path):
 
 # --- identification --------------------------------------------------------------------------
 
-def test_identify_on_the_clean_machine_matches_the_hal_plant(tmp_path):
-    """Identification and validation recordings from two programs (seeds 1 and 2): validation
-    fit >= 99 %, and a2, d0, d1 within 20 % of what the plant and pid gains imply."""
-    m = lx.machine()
+# --- diagnosis ------------------------------------------------------------------------------
+
+def _identify_pair(m, tmp_path: Path) -> dict:
+    """Capture an identification (seed 1) and a validation (seed 2) run; the identify JSON of axis X."""
     for seed in (1, 2):
-        d = tmp_path / f"seed{seed}"
-        res = lx.capture_run(m, lx.generate(d, seed), tmp_path / f"run{seed}.mcap")
+        res = lx.capture_run(m, lx.generate(tmp_path / f"seed{seed}", seed), tmp_path / f"run{seed}.mcap")
         assert res.returncode == 0, res.stderr
     res = _agent("identify", str(tmp_path / "run1.mcap"), "--validate", str(tmp_path / "run2.mcap"),
-                 "--no-diagnose", "--json", str(tmp_path / "result.json"))
+                 "--json", str(tmp_path / "result.json"))
     assert res.returncode == 0, res.stderr
-    ax = json.loads((tmp_path / "result.json").read_text())["axes"]["X"]
+    return json.loads((tmp_path / "result.json").read_text())["axes"]["X"]
+
+
+def _accepted(ax: dict) -> list[dict]:
+    return [c for c in ax["diagnosis"]["candidates"] if c.get("accepted")]
+
+
+def _print_diagnosis(name: str, d: dict) -> None:
+    for c in d["candidates"]:
+        print(f"\n  {c['effect']}: held-out fit {c['fit_before_pct']:.2f} % -> {c['fit_after_pct']:.2f} %, "
+              f"accepted {c.get('accepted')}, {c['parameters']}", end="")
+    print(f"\n{name}: verdict {d['verdict']}")
+
+
+def test_identify_on_the_clean_machine_matches_the_hal_plant(tmp_path):
+    """Identification and validation runs (seeds 1 and 2): validation fit >= 99 %, a2, d0 and
+    d1 within 20 % of what the plant and pid gains imply, and nothing left out."""
+    m = lx.machine()
+    ax = _identify_pair(m, tmp_path)
     implied = lx.implied_model(m.plant, lx.pid_gains(m))
     fit = ax["fit"]["validation"]["tracking_error_fit_pct"]
     print(f"\nvalidation fit {fit:.2f} %; " + ", ".join(
         f"{p} {ax['model'][p]:.4g} (implied {implied[p]:.4g}, {100 * (ax['model'][p] / implied[p] - 1):+.1f} %)"
-        for p in ("a1", "a2", "a3", "d0", "d1")))
+        for p in ("a1", "a2", "a3", "d0", "d1")), end="")
+    _print_diagnosis("clean", ax["diagnosis"])
     assert fit >= 99.0
     for p in ("a2", "d0", "d1"):
         assert ax["model"][p] == pytest.approx(implied[p], rel=0.20), p
+    assert ax["diagnosis"]["verdict"] == "none"
+
+
+@pytest.mark.parametrize("overrides, verdict", [({"gap_mm": 0.02}, "backlash"), ({"static_n": 32.0}, "stribeck")],
+                         ids=["backlash", "stiction"])
+def test_diagnosis_names_the_physics_switched_on_in_the_hal_plant(tmp_path, overrides, verdict):
+    m = lx.machine(**overrides)
+    ax = _identify_pair(m, tmp_path)
+    d = ax["diagnosis"]
+    _print_diagnosis(str(overrides), d)
+    assert d["verdict"] == verdict
+    if verdict == "backlash":
+        (c,) = _accepted(ax)
+        assert c["parameters"]["gap_mm"] == pytest.approx(overrides["gap_mm"], rel=0.25)
+        assert c["fit_after_pct"] > c["fit_before_pct"]
+    if verdict == "stribeck":
+        (c,) = _accepted(ax)
+        assert c["fit_after_pct"] > c["fit_before_pct"]
