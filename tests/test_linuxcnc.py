@@ -206,3 +206,25 @@ def test_diagnosis_names_the_physics_switched_on_in_the_hal_plant(tmp_path, over
     if verdict == "stribeck":
         (c,) = _accepted(ax)
         assert c["fit_after_pct"] > c["fit_before_pct"]
+
+
+def test_ctrl_c_ends_the_capture_cleanly_and_removes_the_sampler(tmp_path):
+    """Ctrl-C on a terminal signals the whole foreground process group (halsampler too)."""
+    import os
+    import signal
+
+    m = lx.machine()
+    before = _netlist(m)
+    out = tmp_path / "log.mcap"
+    proc = subprocess.Popen(lx.AGENT + ["capture", "--quiet", "--port", "linuxcnc://", "-o", str(out)], cwd=lx.ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    while not out.exists():
+        assert proc.poll() is None, proc.stderr.read()
+        time.sleep(0.05)
+    time.sleep(1.0)
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    s = load_recording(out).metadata["summary"]
+    assert (s["end"], s["dropped"]) == ("interrupted", 0) and s["received"] > 900
+    assert _netlist(m) == before

@@ -144,6 +144,9 @@ class LinuxCNCDriver(Driver):
         cfg = "ff" * len(self.joints) + ("b" if self.running_pin else "") + "s"
         loaded = "sampler" in self._hal("list", "comp").split()
         if loaded and self.channel is None:
+            if _PREFIX in self._hal("show", "sig"):
+                raise TransportError("HAL still holds the sampler of a capture that did not close (killed?); "
+                                     "remove it: halcmd unloadrt sampler, and halcmd delsig each rapid-ident-* signal")
             raise TransportError("HAL already has a sampler component loaded (only one can be); unload it "
                                  "(halcmd unloadrt sampler) or give a free FIFO of it with channel=N")
         if self.channel is not None:
@@ -224,9 +227,10 @@ class LinuxCNCDriver(Driver):
         overruns = f"{_PREFIX}{self._ch}-overruns"
         self._own_signals.append(overruns)
         self._hal("net", overruns, f"{ch}.overruns", f"{ch}.pin.{len(pins)}")
+        # its own session: a Ctrl-C on the terminal is for the capture, which then stops it
         self._proc = subprocess.Popen(["halsampler", "-c", str(self._ch), "-t"], stdout=subprocess.PIPE,
                                       stderr=subprocess.PIPE, stdin=subprocess.DEVNULL, cwd="/",
-                                      **self._child_kwargs())
+                                      start_new_session=True, **self._child_kwargs())
         os.set_blocking(self._proc.stdout.fileno(), False)
         if not any(ch in line.split()[5:] for line in self._hal("show", "thread").splitlines()):
             self._hal("addf", ch, self.thread)
