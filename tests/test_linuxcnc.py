@@ -7,6 +7,8 @@ Where LinuxCNC is not installed these tests skip with the reason (the error test
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import time
 from pathlib import Path
@@ -210,9 +212,6 @@ def test_diagnosis_names_the_physics_switched_on_in_the_hal_plant(tmp_path, over
 
 def test_ctrl_c_ends_the_capture_cleanly_and_removes_the_sampler(tmp_path):
     """Ctrl-C on a terminal signals the whole foreground process group (halsampler too)."""
-    import os
-    import signal
-
     m = lx.machine()
     before = _netlist(m)
     out = tmp_path / "log.mcap"

@@ -42,7 +42,6 @@ import select
 import shutil
 import signal
 import subprocess
-import time
 
 from core.errors import InputError, TransportError
 from drivers.base import Driver, Sample, StreamInfo
