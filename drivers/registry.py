@@ -20,6 +20,7 @@ DRIVERS: dict[str, tuple[str, str]] = {
     "modbus-tcp": ("drivers.transports.modbus", "ModbusDriver"),
     "modbus-rtu": ("drivers.transports.modbus", "ModbusDriver"),
     "can": ("drivers.transports.can_bus", "CanDriver"),
+    "linuxcnc": ("drivers.transports.linuxcnc_hal", "LinuxCNCDriver"),
 }
 
 

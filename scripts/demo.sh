@@ -14,6 +14,8 @@ AGENT=.venv/bin/agent
 OUT=${OUT:-runs/demo}
 TRANSPORT=${TRANSPORT:-serial}
 MACHINE=${MACHINE:-fadal-ppi}
+# LinuxCNC is a real controller, not a served simulation: its own script
+[ "$TRANSPORT" = linuxcnc ] && exec bash scripts/demo_linuxcnc.sh
 mkdir -p "$OUT/validation"
 
 echo "== 1. generate the identification programs (low- and high-speed sets, LinuxCNC dialect)"
