@@ -31,7 +31,7 @@ import math
 import numpy as np
 from scipy import signal
 
-from ident.diagnosis.residuals import reversal_times, time_since
+from ident.diagnosis.residuals import excursion_blocks, reversal_times, time_since
 
 __all__ = ["equivalent_disturbance", "analyse_disturbance", "block_input", "DISTURBANCE_BAND_HZ"]
 
@@ -39,18 +39,22 @@ __all__ = ["equivalent_disturbance", "analyse_disturbance", "block_input", "DIST
 DIFFERENTIATION_HZ = 40.0
 #: Band a load or a slow drive effect acts in: w is analysed low-passed to this, Hz.
 DISTURBANCE_BAND_HZ = 10.0
-#: A time block is where the unexplained disturbance, smoothed over 50 ms, exceeds this
-#: many robust standard deviations of itself (a 1-in-10⁴ excursion for Gaussian noise) …
-BLOCK_SIGMAS = 4.0
-#: … for at least this long, s (shorter excursions are the loop's own transients).
-BLOCK_MIN_S = 0.03
-#: Blocks starting this soon after a segment start are the restart transient, s.
-SEGMENT_EDGE_S = 0.1
 #: The disturbance is called time-localised (an external load) when the blocks explain at
-#: least this share of its energy while covering at most ``BLOCK_MAX_TIME_SHARE`` of the time …
+#: least this share of its energy while covering at most ``BLOCK_MAX_TIME_SHARE`` of the time,
+#: more than any state family (velocity, position, reversal, acceleration) alone …
 BLOCK_MIN_SHARE = 0.5
 BLOCK_MAX_TIME_SHARE = 0.5
-#: … and explain more than any state family (velocity, position, reversal, acceleration).
+#: … and the state families together explain less than this share of what the blocks
+#: explain (``blocks_unique_share`` ≥ 1 − this): a load the motion causes recurs wherever
+#: the motion's state recurs, so velocity, position, reversal or acceleration terms
+#: reproduce its blocks; an external load does not …
+BLOCK_MAX_STATE_SHARE = 0.5
+#: … and the blocks add significantly to the state families: partial F-test on the
+#: effective number of independent samples (N / correlation time of the joint fit's
+#: residual), at this level.
+BLOCK_ALPHA = 0.01
+#: Rounds of (state families fitted outside the blocks → blocks found again on what they leave).
+BLOCK_ROUNDS = 4
 
 
 def _lowpass(y: np.ndarray, Ts: float, f_hz: float, starts: np.ndarray) -> np.ndarray:
@@ -120,33 +124,94 @@ def _explained(y: np.ndarray, A: np.ndarray) -> tuple[float, np.ndarray]:
 
 
 def _blocks(y: np.ndarray, Ts: float, starts: np.ndarray) -> list[tuple[int, int]]:
-    """Contiguous stretches where ``y`` smoothed over 50 ms stands out of its own robust spread.
+    """Stretches where ``y`` stands out of its own robust spread (:func:`residuals.excursion_blocks`)."""
+    return excursion_blocks(y, Ts, starts)
 
-    A stretch that starts within ``SEGMENT_EDGE_S`` of a segment start or covers more than
-    half of its segment is the segment's own character (the low-speed set as a whole, the
-    start transient), not a load arriving during the motion: it is left out.
+
+def _state_blocks(wl: np.ndarray, A: np.ndarray, Ts: float,
+                  starts: np.ndarray) -> tuple[list[tuple[int, int]], np.ndarray]:
+    """Blocks of ``wl`` the state regressors ``A`` leave, found robustly; (blocks, state fit).
+
+    Fitted on every sample, the state families absorb part of a load that comes and goes
+    (a position sinusoid lines up with pulses), and what they leave no longer shows the
+    blocks.  So the blocks are first looked for in ``wl`` itself (or, when none stand out
+    there, in what the state fit on all samples leaves), then the state families (with a
+    constant) are fitted *outside* the blocks only and the blocks looked for again in what
+    they leave, until the blocks stop changing: a least-squares fit with the blocks as
+    outliers.
     """
-    k = max(int(round(0.05 / Ts)), 1)
-    ys = np.convolve(y, np.ones(k) / k, mode="same")
-    sigma = 1.4826 * float(np.median(np.abs(ys - np.median(ys)))) or 1e-12
-    hot = np.abs(ys - np.median(ys)) > BLOCK_SIGMAS * sigma
-    out = []
-    i, n, gap = 0, y.size, max(int(round(BLOCK_MIN_S / Ts)), 1)
-    while i < n:
-        if not hot[i]:
-            i += 1
-            continue
-        j = i
-        while j < n and (hot[j] or np.any(hot[j:j + gap])):
-            j += 1
-        if (j - i) * Ts >= BLOCK_MIN_S:
-            out.append((i, j))
-        i = j
-    seg_start = np.maximum.accumulate(np.where(starts, np.arange(n), 0))
-    bounds = np.append(np.flatnonzero(starts), n)
-    seg_len = np.diff(bounds)[np.searchsorted(bounds, np.arange(n), side="right") - 1]
-    edge = int(round(SEGMENT_EDGE_S / Ts))
-    return [(i, j) for i, j in out if i - seg_start[i] >= edge and (j - i) <= 0.5 * seg_len[i]]
+    A1 = np.column_stack([A, np.ones(wl.size)])
+    fit = _explained(wl, A1)[1]
+    spans = _blocks(wl, Ts, starts) or _blocks(wl - fit, Ts, starts)
+    for _ in range(BLOCK_ROUNDS):
+        out = np.ones(wl.size, dtype=bool)
+        for i, j in spans:
+            out[i:j] = False
+        if np.count_nonzero(out) <= A1.shape[1]:
+            break
+        fit = A1 @ _lstsq(A1[out], wl[out])
+        new = _blocks(wl - fit, Ts, starts)
+        if new == spans:
+            break
+        spans = new
+    return spans, fit
+
+
+def _lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least-squares coefficients with the columns scaled to unit norm (then unscaled)."""
+    scale = np.linalg.norm(A, axis=0)
+    scale[scale == 0] = 1.0
+    coef, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
+    return coef / scale
+
+
+def _block_columns(spans: list[tuple[int, int]], n: int) -> np.ndarray:
+    """One indicator column per block, shape (n, len(spans))."""
+    B = np.zeros((n, len(spans)))
+    for k, (i, j) in enumerate(spans):
+        B[i:j, k] = 1.0
+    return B
+
+
+def _blocks_test(wl: np.ndarray, A: np.ndarray, spans: list[tuple[int, int]]) -> dict:
+    """How much the blocks explain beyond the state families, and whether that is significant.
+
+    R² of the state families (with a constant), of the block indicators (with a constant)
+    and of both; ``blocks_unique_share`` = (R²_both − R²_state) / R²_blocks, the part of what
+    the blocks explain that the state families cannot.  Partial F-test of the blocks:
+    ``F = ((R²_both − R²_state)/k) / ((1 − R²_both)/(n_eff − p))`` with k blocks, p columns
+    in all, n_eff = N / τ (τ the correlation time of the joint fit's residual), against the
+    F(k, n_eff − p) quantile at ``1 − BLOCK_ALPHA``.
+    """
+    from scipy.stats import f as f_dist
+
+    from ident.diagnosis.diagnose import correlation_time  # lazy: diagnose imports this module
+
+    n = wl.size
+    one = np.ones((n, 1))
+    B = _block_columns(spans, n)
+    den = float(wl @ wl) or 1.0
+
+    def r2(M: np.ndarray) -> tuple[float, np.ndarray]:
+        res = wl - M @ _lstsq(M, wl)
+        return 1.0 - float(res @ res) / den, res
+
+    r2_state, _ = r2(np.column_stack([A, one]))
+    r2_blocks, _ = r2(np.column_stack([B, one]))
+    r2_both, res = r2(np.column_stack([A, B, one]))
+    k, p = B.shape[1], A.shape[1] + B.shape[1] + 1
+    n_eff = n / correlation_time(res)
+    dof = n_eff - p
+    unique = max(r2_both - r2_state, 0.0)
+    if k == 0 or dof <= 1 or r2_both >= 1.0:
+        F, crit = (math.inf if k and unique > 0 else 0.0), 0.0
+    else:
+        F = (unique / k) / ((1.0 - r2_both) / dof)
+        crit = float(f_dist.ppf(1.0 - BLOCK_ALPHA, k, dof))
+    return {"r2_state": r2_state, "r2_blocks": r2_blocks, "r2_both": r2_both,
+            "blocks_unique_share": unique / r2_blocks if r2_blocks > 0 else 0.0,
+            "f_statistic": float(F), "f_critical": crit, "effective_samples": float(n_eff),
+            "significant": bool(k > 0 and F > crit)}
 
 
 def block_input(n: int, blocks: list[dict], Ts: float) -> np.ndarray:
@@ -202,21 +267,21 @@ def analyse_disturbance(w: np.ndarray, x_r: np.ndarray, x: np.ndarray, v_r: np.n
         [sgn * ((since >= lo) & (since < hi)) for lo, hi in ((0, 0.01), (0.01, 0.03), (0.03, 0.1), (0.1, 0.3))])
     families["acceleration"] = np.column_stack([a_r, np.abs(a_r) * sgn])
     explained = {name: _explained(wl, A)[0] for name, A in families.items()}
-    # time: what the state families together leave, in blocks
-    share_state, fit_state = _explained(wl, np.column_stack(list(families.values())))
+    A_state = np.column_stack(list(families.values()))
+    share_state = _explained(wl, A_state)[0]
+    # time: blocks the state families leave, found with the blocks left out of their fit
+    spans, fit_state = _state_blocks(wl, A_state, Ts, starts)
     rest = wl - fit_state
-    spans = _blocks(rest, Ts, starts)
     blocks = []
-    bw = np.zeros(n)
     for i, j in spans:
-        m = float(np.mean(rest[i:j]))
-        bw[i:j] = m
+        m = float(np.mean(rest[i:j]))  # the block's level above what the motion explains
         blocks.append({"t_start_s": float(t[i]), "t_end_s": float(t[j - 1]), "mean_mm_s2": m})
-    den = float(wl @ wl) or 1.0
-    explained["time_blocks"] = float(np.clip(1.0 - float((wl - bw) @ (wl - bw)) / den, 0.0, 1.0))
+    test = _blocks_test(wl, A_state, spans)
+    explained["time_blocks"] = test["r2_blocks"]
     time_share = sum(j - i for i, j in spans) / max(n, 1)
     res["explained"] = explained
     res["state_families_together"] = share_state
+    res["blocks_test"] = test
     # time blocks name the cause only when they are localised (an external load); otherwise
     # the family of state variables that explains most does
     states = {k: v for k, v in explained.items() if k != "time_blocks"}
@@ -225,7 +290,8 @@ def analyse_disturbance(w: np.ndarray, x_r: np.ndarray, x: np.ndarray, v_r: np.n
     res["blocks_time_share"] = float(time_share)
     res["time_localised"] = bool(
         blocks and explained["time_blocks"] >= BLOCK_MIN_SHARE and time_share <= BLOCK_MAX_TIME_SHARE
-        and explained["time_blocks"] > max(v for k, v in explained.items() if k != "time_blocks"))
+        and explained["time_blocks"] > max(states.values())
+        and test["blocks_unique_share"] >= 1.0 - BLOCK_MAX_STATE_SHARE and test["significant"])
     res["words"] = _words(res)
     return res
 

@@ -3,7 +3,9 @@
 The residual is ``r = e − ê = x̂ − x`` (mm): recorded tracking error minus the model's
 free-run tracking error (SPEC §5).  :func:`localise` measures it
 
-* in time — the worst windows, with timestamps;
+* in time — the worst windows, with timestamps, and the blocks of time where the residual
+  stands out of its own robust spread (:func:`excursion_blocks`: where a load that comes
+  and goes, not the motion, puts the error);
 * by operating condition — commanded speed bins, time since the last reversal, time since
   the last acceleration change (jerk event), commanded acceleration bins, position along
   the axis and a periodogram of the residual against position;
@@ -25,6 +27,7 @@ __all__ = [
     "time_since",
     "energy_share",
     "worst_windows",
+    "excursion_blocks",
     "position_periodogram",
     "spectrum_peaks",
     "peak_in_band",
@@ -105,6 +108,85 @@ def worst_windows(r: np.ndarray, t: np.ndarray, width_s: float, count: int = 5) 
         )
         taken[max(0, i - w + 1) : i + w] = True
     return out
+
+
+#: An excursion block is where a signal, smoothed over 50 ms, exceeds this many robust
+#: standard deviations of itself (a 1-in-10⁴ excursion for Gaussian noise) …
+BLOCK_SIGMAS = 4.0
+#: … for at least this long, s (shorter excursions are the loop's own transients).
+BLOCK_MIN_S = 0.03
+#: Blocks starting this soon after a segment start are the restart transient, and blocks
+#: ending this close to a segment end the edge of the zero-phase filters, s.
+SEGMENT_EDGE_S = 0.1
+
+
+def excursion_blocks(y: np.ndarray, Ts: float, starts: np.ndarray) -> list[tuple[int, int]]:
+    """Stretches (start, end index) where ``y`` smoothed over 50 ms stands out of its own robust spread.
+
+    Robust: the median and 1.4826 × the median absolute deviation, so blocks covering less
+    than half of the time do not hide themselves by inflating the spread.  A stretch that
+    starts within ``SEGMENT_EDGE_S`` of a segment start, ends within it of the segment's
+    end (where zero-phase filters and differences have no data beyond) or covers more than
+    half of its segment is the segment's own character (the low-speed set as a whole, the
+    start transient), not something arriving during the motion: it is left out.
+    """
+    k = max(int(round(0.05 / Ts)), 1)
+    ys = np.convolve(y, np.ones(k) / k, mode="same")
+    sigma = 1.4826 * float(np.median(np.abs(ys - np.median(ys)))) or 1e-12
+    hot = np.abs(ys - np.median(ys)) > BLOCK_SIGMAS * sigma
+    out = []
+    i, n, gap = 0, y.size, max(int(round(BLOCK_MIN_S / Ts)), 1)
+    while i < n:
+        if not hot[i]:
+            i += 1
+            continue
+        j = i
+        while j < n and (hot[j] or np.any(hot[j:j + gap])):
+            j += 1
+        if (j - i) * Ts >= BLOCK_MIN_S:
+            out.append((i, j))
+        i = j
+    seg_start = np.maximum.accumulate(np.where(starts, np.arange(n), 0))
+    bounds = np.append(np.flatnonzero(starts), n)
+    seg_len = np.diff(bounds)[np.searchsorted(bounds, np.arange(n), side="right") - 1]
+    seg_end = seg_start + seg_len
+    edge = int(round(SEGMENT_EDGE_S / Ts))
+    return [(i, j) for i, j in out
+            if i - seg_start[i] >= edge and seg_end[i] - j >= edge and (j - i) <= 0.5 * seg_len[i]]
+
+
+#: The blocks reported are the fewest, largest first, that hold this share of the energy of all.
+MAIN_BLOCKS_SHARE = 0.95
+
+
+def time_blocks(r: np.ndarray, Ts: float, starts: np.ndarray, count: int = 20) -> dict:
+    """Where in time the residual stands out: its main excursion blocks, their energy and time share.
+
+    Every excursion block of ``r`` (:func:`excursion_blocks`) is ranked by its energy and
+    the fewest that hold ``MAIN_BLOCKS_SHARE`` of the energy of all blocks are kept (a
+    coloured residual has many small excursions besides the ones that matter); they are
+    listed in time order, the first ``count``.
+    """
+    spans = excursion_blocks(r, Ts, starts)
+    energy = np.array([float(r[i:j] @ r[i:j]) for i, j in spans])
+    keep: list[tuple[int, int]] = []
+    if spans:
+        order = np.argsort(energy)[::-1]
+        need = MAIN_BLOCKS_SHARE * float(energy.sum())
+        acc = 0.0
+        for k in order:
+            keep.append(spans[k])
+            acc += energy[k]
+            if acc >= need:
+                break
+        keep.sort()
+    mask = np.zeros(r.size, dtype=bool)
+    for i, j in keep:
+        mask[i:j] = True
+    share, time_share = energy_share(r, mask)
+    return {"count": len(keep), "energy_share": share, "time_share": time_share,
+            "blocks": [{"t_start_s": float(i * Ts), "t_end_s": float((j - 1) * Ts),
+                        "rms_mm": float(np.sqrt(np.mean(r[i:j] ** 2)))} for i, j in keep[:count]]}
 
 
 def _bins(values: np.ndarray, r: np.ndarray, edges: list[float], unit: str) -> list[dict]:
@@ -266,6 +348,7 @@ def localise(
     res: dict = {"rms_mm": float(np.sqrt(tot / max(n, 1))), "duration_s": float(n * Ts)}
 
     res["worst_windows"] = worst_windows(r, t, 0.05)
+    res["time_blocks"] = time_blocks(r, Ts, starts)
 
     speed = np.abs(v_r)
     edges = [0.0, v_eps, 0.01 * vmax, 0.1 * vmax, 0.3 * vmax, 0.6 * vmax, np.inf]
