@@ -15,6 +15,7 @@ Modules, one job each:
 - :mod:`.sensors`    -- sensor parameters, quantisation, pitch error (numba)
 - :mod:`.simulate`   -- the closed loop: ``Drive``, ``simulate``, ``record``
 - :mod:`.cases`      -- classes, parameter ranges, ``draw_case``, ``case_recordings``
+- :mod:`.linear`     -- the linearised closed loop: ``closed_loop_mode`` (resonance truth as seen)
 """
 
 from .plant import PlantParams

@@ -7,7 +7,8 @@
 - white noise of standard deviation ``noise_sd`` is added before quantisation, so every
   reading lies on its sensor's grid: ``q round((x + n) / q)``.
 
-Loop closure: semi-closed (feedback from the motor encoder) or full-closed (the scale).
+Loop closure: semi-closed (position and velocity feedback from the motor encoder) or
+full-closed (position loop on the table scale, velocity loop on the motor encoder).
 Capture: by default what the loop's feedback sensor reports; ``capture_table`` records the
 table scale instead (a semi-closed machine fitted with a scale for the identification run,
 the only way lost motion, the table mode or a pitch error of a semi-closed drive shows).
