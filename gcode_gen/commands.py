@@ -16,7 +16,7 @@ from __future__ import annotations
 import hashlib
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence, Union
+from typing import Any, Callable, Sequence, Union
 
 import numpy as np
 
@@ -64,6 +64,26 @@ class CommandedRun:
     @property
     def axes(self) -> list[str]:
         return list(self.commanded)
+
+    @property
+    def block_key(self) -> np.ndarray:
+        """(N,) one integer per (program, line) executed at each sample: for grouping samples by block."""
+        return self.segment.astype(np.int64) * (int(self.line.max(initial=0)) + 1) + self.line
+
+    def per_sample(self, value: Callable[[int, Block], Any], default: Any, dtype: Any = object) -> np.ndarray:
+        """(N,) ``value(program index, block)`` of the block executed at each sample, ``default``
+        where none is (before the first block, while settling).
+
+        Evaluated once per distinct block, not once per sample.
+        """
+        distinct, inverse = np.unique(self.block_key, return_inverse=True)
+        width = int(self.line.max(initial=0)) + 1
+        values = []
+        for key in distinct:
+            p, line = divmod(int(key), width)
+            block = self.blocks[p].get(line)
+            values.append(default if block is None else value(p, block))
+        return np.asarray(values, dtype=dtype)[inverse]
 
     def feed_at(self, k: int) -> float | None:
         """Programmed feed (mm/s) of the block executed at sample ``k``, None for rapids/settling."""

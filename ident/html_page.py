@@ -13,7 +13,7 @@ from pathlib import Path
 
 from core.errors import InputError
 
-__all__ = ["plt", "png", "table", "page", "write_html", "CSS"]
+__all__ = ["pyplot", "png", "table", "page", "write_html", "CSS"]
 
 CSS = """body{font-family:system-ui,sans-serif;max-width:1150px;margin:auto;padding:1em;color:#222}
 table{border-collapse:collapse;margin:.5em 0}th,td{border:1px solid #ccc;padding:3px 8px;text-align:left;font-size:14px}
@@ -21,7 +21,7 @@ th{background:#f3f3f3}img{max-width:100%;margin:.5em 0}.verdict{font-weight:600;
 pre{font-size:12px;background:#f7f7f7;padding:.5em;overflow:auto}.warn{background:#fde8e8;padding:.5em}"""
 
 
-def plt():
+def pyplot():
     """matplotlib.pyplot on the non-interactive Agg backend."""
     import matplotlib
 
@@ -35,7 +35,7 @@ def png(fig) -> str:
     """An ``<img>`` holding ``fig`` as an embedded PNG; closes the figure."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    plt().close(fig)
+    pyplot().close(fig)
     return '<img alt="figure" src="data:image/png;base64,' + base64.b64encode(buf.getvalue()).decode() + '">'
 
 

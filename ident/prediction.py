@@ -136,13 +136,13 @@ def _arcs(run: CommandedRun, axes: list[str]) -> tuple[list, np.ndarray | None, 
                 arcs.append((c, r, 1.0 if b.motion == "G3" else -1.0))
     if not arcs:
         return [], None, plane
-    of = np.array([index.get((int(s), int(l)), -1) for s, l in zip(run.segment, run.line)])
+    of = run.per_sample(lambda p, b: index.get((p, b.line), -1), -1, dtype=np.int64)
     return arcs, of, plane
 
 
 def _feed_moves(run: CommandedRun) -> np.ndarray:
-    motion = {(p, line): b.motion for p, blocks in enumerate(run.blocks) for line, b in blocks.items()}
-    return np.array([motion.get((int(s), int(l))) in ("G1", "G2", "G3") for s, l in zip(run.segment, run.line)])
+    """(N,) True where a feed move (G1/G2/G3) is executing."""
+    return run.per_sample(lambda p, b: b.motion in ("G1", "G2", "G3"), False, dtype=bool)
 
 
 def contour_of_run(run: CommandedRun, commanded: dict[str, np.ndarray], actual: dict[str, np.ndarray]) -> np.ndarray:
@@ -184,7 +184,7 @@ def analyse(pred: Prediction) -> PredictionSummary:
 
 def _worst_places(run: CommandedRun, rec: Recording, c: np.ndarray, sel: np.ndarray, names: list[str]) -> list[Place]:
     """The largest contour error of each program line, the ``WORST_PLACES`` largest first."""
-    key = run.segment.astype(np.int64) * (int(run.line.max()) + 1) + run.line
+    key = run.block_key
     order = np.flatnonzero(sel)[np.argsort(-c[sel], kind="stable")]
     places, seen = [], set()
     for k in order:

@@ -15,7 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ident.html_page import page, plt, png, table, write_html
+from ident.html_page import page, png, pyplot, table, write_html
 from ident.prediction import Comparison, PredictionSummary
 
 __all__ = ["render_prediction_report", "write_prediction_report"]
@@ -67,8 +67,8 @@ def _toolpath_plot(summaries: Sequence[PredictionSummary]) -> str:
     shown = [s for s in summaries if s.contour is not None and s.prediction is not None]
     if not shown:
         return ""
-    pyplot = plt()
-    fig, axs = pyplot.subplots(1, len(shown), figsize=(5.5 * len(shown), 5), squeeze=False)
+    plt = pyplot()
+    fig, axs = plt.subplots(1, len(shown), figsize=(5.5 * len(shown), 5), squeeze=False)
     vmax = max(float(np.max(np.abs(s.contour[s.feed_move]), initial=0.0)) for s in shown) * 1e3 or 1.0
     for ax, s in zip(axs[0], shown):
         rec = s.prediction.recording
@@ -93,8 +93,8 @@ def _time_plot(summaries: Sequence[PredictionSummary]) -> str:
     axes = list(dict.fromkeys(a for s in shown for a in s.axes))
     with_contour = any(s.contour is not None for s in shown)
     n = len(axes) + (1 if with_contour else 0)
-    pyplot = plt()
-    fig, axs = pyplot.subplots(n, 1, figsize=(11, 2.4 * n), sharex=True, squeeze=False)
+    plt = pyplot()
+    fig, axs = plt.subplots(n, 1, figsize=(11, 2.4 * n), sharex=True, squeeze=False)
     row = 0
     if with_contour:
         for i, s in enumerate(shown):
@@ -125,8 +125,8 @@ def _comparison(c: Comparison) -> str:
                     ("predicted / measured max", f"{d['max_ratio']:.3f}"),
                     ("measured rms", _um(d["measured_rms_mm"])), ("predicted rms", _um(d["predicted_rms_mm"])),
                     ("rms of the difference / measured rms", f"{d['rms_difference_ratio'] * 100:.1f} %")])]
-    pyplot = plt()
-    fig, ax = pyplot.subplots(figsize=(11, 3))
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(11, 3))
     k = slice(None, None, _step(c.t.size))
     ax.plot(c.t[k], np.where(c.mask, c.measured, np.nan)[k] * 1e3, color="k", lw=0.9, label="measured")
     ax.plot(c.t[k], np.where(c.mask, c.predicted, np.nan)[k] * 1e3, color="C3", lw=0.9, ls="--", label="predicted")

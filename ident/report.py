@@ -16,16 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ident.html_page import page, plt, png, table, write_html
+from ident.html_page import page, png, pyplot, table, write_html
 from ident.results import AxisResult, AxisTraces, IdentifyResult
 
 __all__ = ["write_report", "render_report"]
 
 _MAX_POINTS = 6000
-
-
-_plt = plt
-_png = png
 
 
 def _decimate(*arrays: np.ndarray) -> list[np.ndarray]:
@@ -35,7 +31,7 @@ def _decimate(*arrays: np.ndarray) -> list[np.ndarray]:
 
 
 def _bode(r: AxisResult) -> str:
-    plt = _plt()
+    plt = pyplot()
     nyq = 0.5 / r.sample_period
     f = np.logspace(-1, math.log10(nyq), 400)
     fig, ax = plt.subplots(2, 2, figsize=(11, 6), sharex=True)
@@ -57,11 +53,11 @@ def _bode(r: AxisResult) -> str:
         a.grid(True, which="both", alpha=0.3)
     ax[0, 0].legend(fontsize=8)
     fig.suptitle(f"axis {r.axis}: frequency responses")
-    return _png(fig)
+    return png(fig)
 
 
 def _time_plots(tr: AxisTraces, title: str) -> str:
-    plt = _plt()
+    plt = pyplot()
     e = tr.commanded - tr.actual
     e_hat = tr.commanded - tr.simulated
     t, xr, x, xs, e_d, eh_d = _decimate(tr.t, tr.commanded, tr.actual, tr.simulated, e, e_hat)
@@ -93,12 +89,12 @@ def _time_plots(tr: AxisTraces, title: str) -> str:
     for a in ax:
         a.grid(True, alpha=0.3)
     fig.suptitle(title)
-    return _png(fig)
+    return png(fig)
 
 
 def _contour_plot(result: IdentifyResult) -> str:
     c = result.contour
-    plt = _plt()
+    plt = pyplot()
     t, m, p = _decimate(c.t, c.measured, c.predicted)
     fig, ax = plt.subplots(1, 1, figsize=(11, 3.5))
     ax.plot(t, m * 1e3, label="measured", lw=0.8)
@@ -108,14 +104,14 @@ def _contour_plot(result: IdentifyResult) -> str:
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(f"contour error, axes {'/'.join(c.axes)} ({c.source} recording)")
-    return _png(fig)
+    return png(fig)
 
 
 def _diagnosis_plots(r: AxisResult) -> str:
     d = r.diagnosis
     traces = getattr(d, "traces", None) or {}
     out = []
-    plt = _plt()
+    plt = pyplot()
     t = traces.get("t")
     if t is not None and "residual_before" in traces:
         keys = [k for k in ("residual_before", "residual_after") if k in traces]
@@ -128,7 +124,7 @@ def _diagnosis_plots(r: AxisResult) -> str:
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
         ax.set_title(f"axis {r.axis}: residual before / after the diagnosed physics is added")
-        out.append(_png(fig))
+        out.append(png(fig))
     # Before/after overlay of the tracking error where the base model misses most,
     # on the held-out (validation) recording when there is one.
     pre = "validation_" if "validation_x_hat_after" in traces else ""
@@ -152,11 +148,8 @@ def _diagnosis_plots(r: AxisResult) -> str:
         ax.legend(fontsize=8)
         where = "validation recording" if pre else "identification recording"
         ax.set_title(f"axis {r.axis}: residual where the added physics helps most ({where}, zoom)")
-        out.append(_png(fig))
+        out.append(png(fig))
     return "\n".join(out)
-
-
-_table = table
 
 
 def _g(v: float) -> str:
@@ -188,7 +181,7 @@ def _axis_section(r: AxisResult) -> str:
              ("poles", "; ".join(f"{f:.2f} Hz, ζ {d:.2f}" for f, d in m.poles())),
              ("zeros", "; ".join(f"{f:.2f} Hz, ζ {d:.2f}" for f, d in m.zeros()) or "none"),
              ("time", ", ".join(f"{k} {v:.2f} s" for k, v in r.timings.items()))]
-    parts.append(_table(rows))
+    parts.append(table(rows))
     parts.append("<h3>What unconstrained least squares gives, and why the constraints matter</h3>")
     parts.append(f"<p>{html.escape(r.unconstrained_note)}</p>")
     parts.append(_bode(r))
@@ -220,7 +213,7 @@ def _axis_section(r: AxisResult) -> str:
 def render_report(result: IdentifyResult) -> str:
     """The report as one HTML string."""
     head = [f"<h1>rapid-ident: drive identification</h1>",
-            _table([("recording", result.source), ("validation", result.validation_source or "none"),
+            table([("recording", result.source), ("validation", result.validation_source or "none"),
                     ("controller", str(result.metadata.get("controller", "unknown"))),
                     ("transport", str(result.metadata.get("transport", "unknown"))),
                     ("programs", ", ".join(p.get("name", "?") for p in result.metadata.get("programs", []) or [] if isinstance(p, dict)) or "unknown"),
@@ -229,7 +222,7 @@ def render_report(result: IdentifyResult) -> str:
     if result.contour is not None:
         c = result.contour.to_dict()
         body.append("<h2>Contour error</h2>")
-        body.append(_table([("measured max", f"{c['measured']['max_abs_mm'] * 1e3:.2f} µm"),
+        body.append(table([("measured max", f"{c['measured']['max_abs_mm'] * 1e3:.2f} µm"),
                             ("predicted max", f"{c['predicted']['max_abs_mm'] * 1e3:.2f} µm"),
                             ("prediction error rms", f"{c['prediction_error']['rms_mm'] * 1e3:.2f} µm")]))
         body.append(_contour_plot(result))

@@ -26,13 +26,13 @@ def ballbar(
 
     Example: agent ballbar --machine result.json --radius 100 --feed 16.67 --report ballbar.html
     """
+    from agent.outputs import check_suffix, write_json
     from agent.workflows.predict import load_machines
     from core.reader import load_recording
     from ident.synthetic_ballbar import run_ballbar
 
-    for path, flag, suffix in ((json_out, "--json", ".json"), (report, "--report", ".html")):
-        if path is not None and path.suffix.lower() != suffix:
-            raise InputError(f"{flag} {path}: expected a {suffix} file")
+    check_suffix(json_out, "--json", ".json")
+    check_suffix(report, "--report", ".html")
     plane = tuple(a.strip().upper() for a in axes.split(",") if a.strip())
     try:
         c = tuple(float(v) for v in centre.split(","))
@@ -52,11 +52,8 @@ def ballbar(
 
             typer.echo("  recorded: " + "; ".join(words(t.measured)))
     if json_out is not None:
-        try:
-            json_out.write_text(json.dumps({"format": "rapid-ident-ballbar/1", "tests": [t.to_dict() for t in tests]},
-                                           indent=2, allow_nan=False))
-        except OSError as exc:
-            raise InputError.about("json", f"{json_out}: cannot write ({exc.strerror})") from None
+        write_json(json.dumps({"format": "rapid-ident-ballbar/1", "tests": [t.to_dict() for t in tests]},
+                              indent=2, allow_nan=False), json_out)
         typer.echo(f"wrote {json_out}")
     if report is not None:
         from ident.ballbar_report import write_ballbar_report

@@ -8,8 +8,6 @@ from typing import List, Optional
 
 import typer
 
-from core.errors import InputError
-
 
 def identify(
     log: Path = typer.Argument(..., help="Recording to identify from (.mcap or .csv)."),
@@ -35,13 +33,13 @@ def identify(
 
     Example: agent identify run.mcap --validate other.mcap --json result.json --report report.html
     """
+    from agent.outputs import check_suffix
     from agent.summary import print_summary
     from agent.workflows.identify import identify_files
     from ident.model import Bounds
 
-    for path, flag, suffix in ((json_out, "--json", ".json"), (report, "--report", ".html")):
-        if path is not None and path.suffix.lower() != suffix:
-            raise InputError(f"{flag} {path}: expected a {suffix} file")
+    check_suffix(json_out, "--json", ".json")
+    check_suffix(report, "--report", ".html")
     axes = [a for item in axis for a in item.split(",") if a.strip()]
     with _progress_line() as progress:
         result = identify_files(

@@ -7,8 +7,6 @@ from typing import List, Optional
 
 import typer
 
-from core.errors import InputError
-
 
 def predict(
     programs: List[Path] = typer.Argument(..., help="G-code programs, run in order as separate segments."),
@@ -24,12 +22,12 @@ def predict(
 
     Example: agent predict part.ngc --machine result.json --set X.a1=150 --report predicted.html
     """
+    from agent.outputs import check_suffix
     from agent.workflows.predict import load_machines, predict_files
 
-    for path, flag, suffix in ((json_out, "--json", (".json",)), (report, "--report", (".html",)),
-                               (out, "--out", (".mcap", ".csv"))):
-        if path is not None and path.suffix.lower() not in suffix:
-            raise InputError(f"{flag} {path}: expected a {' or '.join(suffix)} file")
+    check_suffix(json_out, "--json", ".json")
+    check_suffix(report, "--report", ".html")
+    check_suffix(out, "--out", ".mcap", ".csv")
     machines = load_machines(machine, set_)
     summaries, comparisons = predict_files(programs, machines, against=against, json_out=json_out,
                                            report=report, out=out)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from agent.outputs import write_json
 from core.reader import load_recording
 from ident.pipeline import identify as identify_recording
 from ident.pipeline import load_models
@@ -27,12 +28,7 @@ def identify_files(path: Path, *, validate: Path | None = None, against: Path | 
         **options,
     )
     if json_out is not None:
-        try:
-            Path(json_out).write_text(result.to_json())
-        except OSError as exc:
-            from core.errors import InputError
-
-            raise InputError.about("json", f"{json_out}: cannot write ({exc.strerror})") from None
+        write_json(result.to_json(), json_out)
     if report is not None:
         result.report(report)
     return result

@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 from typing import Sequence
 
+from agent.outputs import write_json
 from core.errors import InputError
 from core.reader import load_recording
 from gcode_gen.commands import ProgramLike
@@ -64,10 +65,7 @@ def predict_files(programs: Sequence[ProgramLike], machines: Sequence[VirtualMac
         doc = {"format": "rapid-ident-prediction/1", "programs": names,
                "machines": [s.to_dict() for s in summaries],
                "comparisons": [c.to_dict() for c in comparisons]}
-        try:
-            Path(json_out).write_text(json.dumps(doc, indent=2, allow_nan=False))
-        except OSError as exc:
-            raise InputError.about("json", f"{json_out}: cannot write ({exc.strerror})") from None
+        write_json(json.dumps(doc, indent=2, allow_nan=False), json_out)
     if report is not None:
         from ident.prediction_report import write_prediction_report
 
