@@ -15,10 +15,10 @@ normalised numerator/friction of eq. 3.10::
 with box bounds ``ω_n,min ≤ ω_n ≤ f_max``, ``ζ_min ≤ ζ ≤ ζ_max``, ``p_min ≤ p ≤ f_max``
 (eq. 3.8, :class:`ident.model.Bounds`), so every iterate has its poles inside the
 constraint region.  A projected Levenberg–Marquardt with a finite-difference Jacobian
-(or, on request, ``scipy.optimize.least_squares``' trust-region reflective method) does
-the search on a coarser simulator (``substeps_search`` friction sub-steps; the linear part
-is exact either way) and on every k-th residual; the before/after fit is computed with the
-default simulator on all samples.  The refined model is returned only if it improves the
+(:func:`ident.least_squares.bounded_lm`; or, on request, ``scipy.optimize.least_squares``'
+trust-region reflective method) does the search on a coarser simulator (``substeps_search``
+friction sub-steps; the linear part is exact either way) and on every k-th residual; the
+before/after fit is computed with the default simulator on all samples.  The refined model is returned only if it improves the
 fit of the (bounded) starting model.
 """
 
@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.errors import InputError
+from ident.least_squares import bounded_lm
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel, alphas_from_search
 from ident.preprocessing import shift_command
@@ -146,65 +147,6 @@ def _active(q: np.ndarray, lb: np.ndarray, ub: np.ndarray) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _projected_lm(residual, q0: np.ndarray, lb: np.ndarray, ub: np.ndarray, *, max_iter: int,
-                  ftol: float, xtol: float, diff_step: float = 1e-5) -> str:
-    """Levenberg–Marquardt on a box, projected: minimises ½‖r(q)‖² with lb ≤ q ≤ ub.
-
-    Forward-difference Jacobian (one simulation per parameter), Marquardt scaling by
-    diag(JᵀJ), steps clipped to the box; parameters on a bound whose gradient points out
-    of the box are held for that iteration.  The 8×8 algebra uses ``einsum``/``solve``
-    only — scipy's TRF spends most of its time in an SVD of the m×8 Jacobian that
-    multi-threaded BLAS makes slow on a loaded machine.  Returns a termination message.
-    """
-    n = q0.size
-    q = q0.copy()
-    r = residual(q)
-    cost = float(r @ r)
-    lam = 1e-3
-    for it in range(max_iter):
-        J = np.empty((r.size, n))
-        for j in range(n):
-            h = diff_step * max(1.0, abs(q[j]))
-            if q[j] + h > ub[j]:
-                h = -h
-            qj = q.copy()
-            qj[j] += h
-            J[:, j] = (residual(qj) - r) / h
-        A = np.einsum("ki,kj->ij", J, J)
-        g = np.einsum("ki,k->i", J, r)
-        held = ((q <= lb) & (g > 0)) | ((q >= ub) & (g < 0))
-        free = np.flatnonzero(~held)
-        if free.size == 0:
-            return "every parameter is held at a bound"
-        Af, gf = A[np.ix_(free, free)], g[free]
-        dA = np.maximum(np.diag(Af), 1e-12 * max(1.0, float(np.max(np.diag(Af)))))
-        for _ in range(10):
-            try:
-                step = np.linalg.solve(Af + lam * np.diag(dA), -gf)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            q_new = q.copy()
-            q_new[free] += step
-            q_new = np.clip(q_new, lb, ub)
-            r_new = residual(q_new)
-            cost_new = float(r_new @ r_new)
-            if cost_new < cost:
-                break
-            lam *= 4.0
-        else:
-            return "no step decreases the cost"
-        dq = np.abs(q_new - q)
-        decrease = (cost - cost_new) / cost if cost > 0 else 0.0
-        q, r, cost = q_new, r_new, cost_new
-        lam = max(lam / 3.0, 1e-9)
-        if decrease < ftol:
-            return f"ftol: relative cost decrease {decrease:.1e} < {ftol:g} after {it + 1} iterations"
-        if np.all(dq <= xtol * (xtol + np.abs(q))):
-            return f"xtol: step below {xtol:g} after {it + 1} iterations"
-    return f"max_iter: {max_iter} iterations"
-
-
 def refine(
     model,
     x_r: np.ndarray,
@@ -258,7 +200,7 @@ def refine(
         The eq. 3.11 regression of this recording: used to re-fit the numerator and
         friction when the starting model's poles had to be moved into the bounds.
     optimizer : "lm" | "trf"
-        The projected Levenberg–Marquardt of this module (default) or
+        The projected Levenberg–Marquardt :func:`ident.least_squares.bounded_lm` (default) or
         ``scipy.optimize.least_squares``' trust-region reflective method.
     """
     t0 = time.perf_counter()
@@ -304,7 +246,8 @@ def refine(
 
     try:
         if optimizer == "lm":
-            message = _projected_lm(residual, q0, lb, ub, max_iter=max_nfev, ftol=ftol, xtol=1e-6)
+            message = bounded_lm(residual, q0, lb, ub, max_iter=max_nfev, step=1e-5, relative_step=True,
+                                 ftol=ftol, ftol_iter=1, xtol=1e-6).message
         elif optimizer == "trf":
             from scipy.optimize import least_squares  # only for optimizer='trf': 0.3–0.6 s to import
 

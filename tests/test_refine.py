@@ -111,3 +111,28 @@ def test_unknown_optimizer_is_an_input_error():
     x_r = command(4, n=500)
     with pytest.raises(InputError, match="optimizer must be 'lm' or 'trf'"):
         refine(TRUE, x_r, simulate(TRUE, x_r, TS), TS, optimizer="newton")
+
+
+def test_time_budget_stops_the_search_and_keeps_the_best_point(monkeypatch):
+    # a clock that advances 1 ms at every reading: the budget runs out after about 30 simulations,
+    # raised from inside the residual, in the middle of the optimiser's iterations
+    import types
+
+    import ident.refine as refine_module
+
+    clock = {"t": 0.0}
+
+    def perf_counter():
+        clock["t"] += 1e-3
+        return clock["t"]
+
+    monkeypatch.setattr(refine_module, "time", types.SimpleNamespace(perf_counter=perf_counter))
+    x_r = command(1)
+    x = simulate(TRUE, x_r, TS)
+    start = DriveModel.from_search(WN * 1.25, ZETA * 0.7, P * 2.0, 0.98, 1.3 * 190.1 / A2, 0.0,
+                                   0.6 * 441.0 / A2, 1.4 * -302.0 / A2)
+    res = refine(start, x_r, x, TS, time_budget_s=0.0305)
+    assert res.message == "time budget of 0.0305 s reached"
+    assert res.nfev == 30
+    assert res.improved
+    assert res.fit_after.tracking_error_fit_pct > model_fit(res.start_model, x_r, x, TS).tracking_error_fit_pct

@@ -40,6 +40,7 @@ from ident.diagnosis.augmented import (
     substeps,
 )
 from ident.diagnosis.residuals import peak_in_band
+from ident.least_squares import bounded_lm
 
 if TYPE_CHECKING:
     from ident.regression import Regression
@@ -294,9 +295,10 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         return r
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
-        z, cost0 = _levenberg_marquardt(resid, z0, lb, ub, max_iter=max_iter, step=steps(fd_step))
+        fit = bounded_lm(resid, z0, lb, ub, max_iter=max_iter, step=steps(fd_step))
         if fd_step > FD_STEP:  # polish: the coarse step stops short of the valley's floor
-            z, cost0 = _levenberg_marquardt(resid, z, lb, ub, max_iter=max(max_iter // 2, 1), step=steps(FD_STEP))
+            fit = bounded_lm(resid, fit.z, lb, ub, max_iter=max(max_iter // 2, 1), step=steps(FD_STEP))
+    z, cost0 = fit.z, fit.cost
     if not np.isfinite(cost0):
         return spec.copy()
     th, ep = unpack(z)
@@ -304,71 +306,6 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     out.theta = th
     out.ep = ep
     return out
-
-
-def _levenberg_marquardt(resid, z0: np.ndarray, lb: np.ndarray, ub: np.ndarray, *, max_iter: int = 25,
-                         step: float | np.ndarray = 1e-3, rtol: float = 1e-5) -> tuple[np.ndarray, float]:
-    """Bounded Levenberg–Marquardt on ½‖r(z)‖² with forward-difference Jacobian (step in z units).
-
-    Small and explicit because the residual vector is long (N samples) and the parameter
-    vector short (≤ 14): the normal equations JᵀJ (p×p) are cheap where an SVD of J is not.
-    Steps are projected onto the box [lb, ub].  The free-run cost is not smooth (friction
-    switching), so when no damping gives a descent the Jacobian is re-taken with a smaller
-    difference step and the damping reset before giving up.  Returns (z, ½‖r‖²).
-    """
-    z = z0.copy()
-    r = resid(z)
-    cost = 0.5 * float(r @ r)
-    lam = 1e-3
-    p = z.size
-    small = 0
-    fails = 0
-    step = np.broadcast_to(np.asarray(step, dtype=float), z.shape)
-    h0 = step
-    for _ in range(max_iter):
-        J = np.empty((r.size, p))
-        for i in range(p):
-            h = h0[i] if z[i] + h0[i] <= ub[i] else -h0[i]
-            zi = z.copy()
-            zi[i] += h
-            J[:, i] = (resid(zi) - r) / h
-        A = J.T @ J
-        g = J.T @ r
-        d = np.diag(A).copy()
-        d[d <= 0] = 1e-12
-        improved = False
-        for _t in range(6):
-            try:
-                delta = np.linalg.solve(A + lam * np.diag(d), -g)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            if not np.all(np.isfinite(delta)):
-                lam *= 10.0
-                continue
-            zn = np.minimum(np.maximum(z + delta, lb), ub)
-            rn = resid(zn)
-            cn = 0.5 * float(rn @ rn)
-            if np.isfinite(cn) and cn < cost:
-                rel = (cost - cn) / cost if cost > 0 else 0.0
-                z, r, cost = zn, rn, cn
-                lam = max(lam / 5.0, 1e-9)
-                improved = True
-                small = small + 1 if rel < rtol else 0
-                break
-            lam *= 6.0
-        if improved:
-            fails = 0
-            h0 = step
-            if small >= 2:
-                break
-        else:
-            fails += 1
-            if fails >= 2:
-                break
-            lam = 1e-3
-            h0 = step * 0.1
-    return z, cost
 
 
 def _backlash_start(spec: ModelSpec, params: dict, modes: dict) -> ModelSpec:

@@ -1,0 +1,176 @@
+"""Bounded nonlinear least squares: the Levenberg–Marquardt of the output-error fits.
+
+The output-error refinement (:mod:`ident.refine`) and the candidate fits of the diagnosis
+(:mod:`ident.diagnosis.candidates`) minimise a simulation's mismatch over a handful of
+parameters inside a box.  Both use :func:`bounded_lm`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["LMResult", "bounded_lm"]
+
+#: Damping schedule: starting λ, its floor, the factor it grows by after a rejected trial
+#: step, the factor it shrinks by after an accepted one, and the trials per iteration.
+_LAM0, _LAM_MIN, _LAM_UP, _LAM_DOWN, _TRIALS = 1e-3, 1e-9, 6.0, 5.0, 6
+
+
+@dataclass(frozen=True)
+class LMResult:
+    """Outcome of :func:`bounded_lm`.
+
+    Attributes
+    ----------
+    z : ndarray (n,)
+        The best point found (inside the box).
+    cost : float
+        ½‖r(z)‖² at ``z``.
+    nfev : int
+        Residual evaluations, the finite-difference Jacobians' included.
+    message : str
+        Why the search stopped.
+    """
+
+    z: np.ndarray
+    cost: float
+    nfev: int
+    message: str
+
+
+def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_step: bool = False,
+               ftol: float = 1e-5, ftol_iter: int = 2, xtol: float = 1e-8) -> LMResult:
+    """Minimise ½‖r(z)‖² subject to lb ≤ z ≤ ub by a projected Levenberg–Marquardt.
+
+    Each iteration takes a forward-difference Jacobian J (one residual evaluation per
+    parameter) and tries damped Gauss–Newton steps, solving
+    ``(JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr`` (Marquardt's scaling: the damping is invariant to
+    the parameters' units), λ growing ×6 after each rejected trial (six trials at most) and
+    shrinking ÷5 after an accepted step, from 10⁻³.
+
+    Parameters
+    ----------
+    resid : callable
+        ``resid(z) -> ndarray (m,)``, the residual vector.  It should return finite values
+        (a large constant residual for points that make no sense); a trial point with a
+        non-finite cost is rejected.  Exceptions it raises propagate: a caller can stop the
+        search from inside it (a time budget) and keep its own record of the best point.
+    z0 : array_like (n,)
+        Starting point; projected onto the box first.
+    lb, ub : array_like (n,)
+        Bounds; ``±inf`` for none.
+    max_iter : int
+        Iterations (Jacobians) at most.
+    step : float or array_like (n,)
+        Forward-difference step, per parameter if an array.  Taken towards the inside of
+        the box at an upper bound.
+    relative_step : bool
+        False (default): the step is absolute, in the units of z.  True: parameter j is
+        stepped by ``step[j] * max(1, |z[j]|)``.
+    ftol : float
+        Stop after ``ftol_iter`` consecutive iterations each lowering the cost by less than
+        this fraction.
+    ftol_iter : int
+        See ``ftol`` (default 2: a rough cost, e.g. a simulation with friction switching,
+        can give one small decrease well away from its minimum).
+    xtol : float
+        Stop when an accepted step moves every parameter by at most
+        ``xtol * (xtol + |z[j]|)``.
+
+    Returns
+    -------
+    LMResult
+
+    Notes
+    -----
+    Bounds: trial points are projected (clipped) onto the box, and a parameter on a bound
+    whose gradient Jᵀr points out of the box is held there for the iteration (left out of
+    the step) so that the others take the step that is best with it fixed, rather than one
+    computed as if it could move and then cut off.
+
+    Rough costs: when no damping gives a descent, the Jacobian is taken again with a step
+    ten times smaller and λ reset, once, before the search gives up (a coarse difference
+    on a cost that ripples, as a simulation with friction or contact events does, reads
+    the ripple rather than the slope near the minimum).  After an accepted step the given
+    difference step is used again.
+
+    Why the normal equations and not a factorisation of J (QR in MINPACK, an SVD in
+    scipy's trust-region reflective method): the residual vector is long (up to tens of
+    thousands of samples) and the parameters few (≤ 14), so JᵀJ costs one pass over J and
+    the n×n solve nothing, where a factorisation of the m×n J dominates the run time, the
+    more so as multi-threaded BLAS is slow on a loaded machine.  Squaring J's condition
+    number is tolerable here: the Marquardt damping keeps the system positive definite, and
+    J itself is a finite difference, accurate to a few digits at best.  ``einsum`` keeps
+    the products single-threaded.
+    """
+    z = np.clip(np.asarray(z0, dtype=float), lb, ub)
+    lb = np.broadcast_to(np.asarray(lb, dtype=float), z.shape)
+    ub = np.broadcast_to(np.asarray(ub, dtype=float), z.shape)
+    step = np.broadcast_to(np.asarray(step, dtype=float), z.shape)
+    n = z.size
+    nfev = 1
+    r = resid(z)
+    cost = 0.5 * float(r @ r)
+    lam = _LAM0
+    h0 = step
+    small = 0  # consecutive accepted steps with a relative decrease below ftol
+    retried = False  # the last iteration found no descent: its Jacobian was re-taken with h0 = step / 10
+    for it in range(max_iter):
+        J = np.empty((r.size, n))
+        for j in range(n):
+            h = h0[j] * max(1.0, abs(z[j])) if relative_step else h0[j]
+            if z[j] + h > ub[j]:
+                h = -h
+            zj = z.copy()
+            zj[j] += h
+            nfev += 1
+            J[:, j] = (resid(zj) - r) / h
+        A = np.einsum("ki,kj->ij", J, J)
+        g = np.einsum("ki,k->i", J, r)
+        held = ((z <= lb) & (g > 0)) | ((z >= ub) & (g < 0))
+        free = np.flatnonzero(~held)
+        if free.size == 0:
+            return LMResult(z, cost, nfev, "every parameter is held at a bound")
+        Af, gf = A[np.ix_(free, free)], g[free]
+        d = np.maximum(np.diag(Af), 1e-12 * max(1.0, float(np.max(np.diag(Af)))))
+        for _ in range(_TRIALS):
+            try:
+                delta = np.linalg.solve(Af + lam * np.diag(d), -gf)
+            except np.linalg.LinAlgError:
+                lam *= 10.0
+                continue
+            if not np.all(np.isfinite(delta)):
+                lam *= 10.0
+                continue
+            z_new = z.copy()
+            z_new[free] += delta
+            z_new = np.clip(z_new, lb, ub)
+            nfev += 1
+            r_new = resid(z_new)
+            cost_new = 0.5 * float(r_new @ r_new)
+            if np.isfinite(cost_new) and cost_new < cost:
+                break
+            lam *= _LAM_UP
+        else:
+            if retried:
+                return LMResult(z, cost, nfev,
+                                "no step decreases the cost, also with a 10x smaller difference step")
+            retried = True
+            lam = _LAM0
+            h0 = step * 0.1
+            continue
+        rel = (cost - cost_new) / cost if cost > 0 else 0.0
+        dz = np.abs(z_new - z)
+        z, r, cost = z_new, r_new, cost_new
+        lam = max(lam / _LAM_DOWN, _LAM_MIN)
+        retried = False
+        h0 = step
+        small = small + 1 if rel < ftol else 0
+        if small >= ftol_iter:
+            return LMResult(z, cost, nfev,
+                            f"ftol: relative cost decrease {rel:.1e} < {ftol:g} after {it + 1} iterations")
+        if np.all(dz <= xtol * (xtol + np.abs(z))):
+            return LMResult(z, cost, nfev, f"xtol: step below {xtol:g} after {it + 1} iterations")
+    return LMResult(z, cost, nfev, f"max_iter: {max_iter} iterations")

@@ -1,0 +1,166 @@
+"""The bounded Levenberg–Marquardt (ident.least_squares.bounded_lm) on problems with known solutions."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ident.least_squares import bounded_lm
+
+
+class Counted:
+    """A residual that records the points it is evaluated at."""
+
+    def __init__(self, f):
+        self.f = f
+        self.points = []
+
+    def __call__(self, z):
+        self.points.append(np.array(z, dtype=float))
+        return np.asarray(self.f(z), dtype=float)
+
+
+def _correlated_linear(seed: int = 0):
+    """r = A z − b with two strongly correlated columns and the unconstrained solution (1, −1)."""
+    rng = np.random.default_rng(seed)
+    a0 = rng.standard_normal(200)
+    a1 = 0.9 * a0 + 0.1 * rng.standard_normal(200)
+    A = np.column_stack([a0, a1])
+    b = A @ np.array([1.0, -1.0]) + 0.01 * rng.standard_normal(200)
+    return A, b
+
+
+def test_linear_least_squares_with_an_active_bound_reaches_the_constrained_solution():
+    A, b = _correlated_linear()
+    z_free = np.linalg.lstsq(A, b, rcond=None)[0]
+    assert z_free[1] < -0.5  # the bound z1 >= 0 cuts the unconstrained solution off
+    # with z1 on its bound the solution is the one-column least squares in z0
+    expected = np.array([A[:, 0] @ b / (A[:, 0] @ A[:, 0]), 0.0])
+    resid = Counted(lambda z: A @ z - b)
+    res = bounded_lm(resid, np.array([0.3, 0.5]), [-np.inf, 0.0], [np.inf, np.inf], max_iter=50,
+                     step=1e-6, ftol=1e-12, xtol=1e-12)
+    np.testing.assert_allclose(res.z, expected, atol=1e-6)
+    assert res.z[1] == 0.0
+    r = A @ expected - b
+    assert res.cost == pytest.approx(0.5 * r @ r, rel=1e-9)
+    assert res.nfev == len(resid.points)
+    assert not res.message.startswith("max_iter")
+
+
+def test_bounded_rosenbrock():
+    # r = (10 (z1 − z0²), 1 − z0): minimum (1, 1); with z0 <= 0.5 it is (0.5, 0.25), cost ½·0.25
+    resid = Counted(lambda z: [10.0 * (z[1] - z[0] ** 2), 1.0 - z[0]])
+    res = bounded_lm(resid, [-1.2, 1.0], [-2.0, -2.0], [0.5, 2.0], max_iter=200, step=1e-7,
+                     ftol=1e-12, xtol=1e-12)
+    np.testing.assert_allclose(res.z, [0.5, 0.25], atol=1e-6)
+    assert res.cost == pytest.approx(0.125, rel=1e-6)
+    assert np.all(np.array(resid.points)[:, 0] <= 0.5)  # never evaluated outside the box
+    assert res.nfev == len(resid.points)
+
+
+def test_a_parameter_on_its_bound_with_the_gradient_pointing_out_is_held():
+    A, b = _correlated_linear()
+    resid = Counted(lambda z: A @ z - b)
+    # start on the bound z1 = 0, where the gradient of the cost in z1 points below it
+    z0 = np.array([1.0, 0.0])
+    assert (A[:, 1] @ (A @ z0 - b)) > 0
+    res = bounded_lm(resid, z0, [-np.inf, 0.0], [np.inf, np.inf], max_iter=1, step=1e-6)
+    # one iteration: z1 stays, z0 takes the (lightly damped) step that is best with z1 fixed,
+    # not the joint step's z0 (≈ 1, the unconstrained solution) cut off in z1
+    conditional = A[:, 0] @ b / (A[:, 0] @ A[:, 0])
+    assert res.z[1] == 0.0
+    assert res.z[0] == pytest.approx(conditional, rel=1e-2)
+    assert abs(res.z[0] - 1.0) > 0.1
+
+
+def test_every_parameter_held_stops_at_once():
+    resid = Counted(lambda z: z - 2.0)  # minimum at 2, the box stops at 1
+    res = bounded_lm(resid, [1.0], [0.0], [1.0], max_iter=10)
+    assert res.z[0] == 1.0
+    assert res.message == "every parameter is held at a bound"
+    assert res.nfev == 2 == len(resid.points)  # the start and one Jacobian column
+    assert resid.points[1][0] < 1.0  # the difference is taken inwards from the upper bound
+
+
+def _rippled(z):
+    """Slope 1 except on [5e-4, 1e-3], where it is −2: a ripple just above the start z = 0."""
+    z = float(z[0])
+    return [z - 1.0 - 3.0 * min(max(z - 5e-4, 0.0), 5e-4)]
+
+
+def test_no_descent_retakes_the_jacobian_with_a_ten_times_smaller_step():
+    # a difference over [0, 1e-3] reads the ripple (slope −0.5, the wrong sign): no damping
+    # gives a descent; over [0, 1e-4] it reads the slope and the search reaches the zero
+    resid = Counted(_rippled)
+    res = bounded_lm(resid, [0.0], [-np.inf], [np.inf], max_iter=20, step=1e-3, ftol=1e-12, xtol=1e-14)
+    assert res.z[0] == pytest.approx(1.0015, abs=1e-9)
+    assert res.cost < 1e-15
+    steps = sorted({abs(p[0]) for p in resid.points[1:] if 0 < abs(p[0]) <= 1e-3})
+    assert steps[0] == pytest.approx(1e-4)
+    assert res.nfev == len(resid.points)
+
+
+def test_gives_up_after_the_smaller_step_fails_too():
+    resid = Counted(lambda z: [z[0] ** 2])  # minimum at the start: nothing decreases the cost
+    res = bounded_lm(resid, [0.0], [-1.0], [1.0], max_iter=10, step=1e-3)
+    assert res.z[0] == 0.0
+    assert res.message.startswith("no step decreases the cost")
+    jacobian_steps = [p[0] for p in resid.points if p[0] > 0]
+    assert jacobian_steps[0] == pytest.approx(1e-3) and jacobian_steps[-1] == pytest.approx(1e-4)
+    assert res.nfev == len(resid.points)
+
+
+def test_relative_difference_steps():
+    resid = Counted(lambda z: [z[0] - 200.0, z[1] - 0.2])
+    bounded_lm(resid, [100.0, 0.5], [-np.inf, -np.inf], [np.inf, np.inf], max_iter=1, step=[1e-5, 1e-3],
+               relative_step=True)
+    # step[j] * max(1, |z[j]|)
+    np.testing.assert_allclose(resid.points[1] - resid.points[0], [1e-3, 0.0], rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(resid.points[2] - resid.points[0], [0.0, 1e-3], rtol=1e-6, atol=1e-12)
+    resid = Counted(resid.f)
+    bounded_lm(resid, [100.0, 0.5], [-np.inf, -np.inf], [np.inf, np.inf], max_iter=1, step=[1e-5, 1e-3])
+    np.testing.assert_allclose(resid.points[1] - resid.points[0], [1e-5, 0.0], rtol=1e-6, atol=1e-12)
+
+
+def test_relative_cost_decrease_stops_the_search():
+    # an exponential fit: a few iterations, then the decrease falls below ftol
+    t = np.linspace(0.0, 1.0, 50)
+    y = 2.0 * np.exp(-3.0 * t)
+    resid = Counted(lambda z: z[0] * np.exp(-z[1] * t) - y - 1e-3 * np.cos(40 * t))
+    one = bounded_lm(resid, [1.0, 1.0], [0.0, 0.0], [10.0, 10.0], max_iter=100, step=1e-7, ftol=1e-4,
+                     ftol_iter=1, xtol=0.0)
+    two = bounded_lm(Counted(resid.f), [1.0, 1.0], [0.0, 0.0], [10.0, 10.0], max_iter=100, step=1e-7,
+                     ftol=1e-4, ftol_iter=2, xtol=0.0)
+    assert one.message.startswith("ftol") and two.message.startswith("ftol")
+    assert two.nfev > one.nfev
+    np.testing.assert_allclose(two.z, [2.0, 3.0], rtol=1e-2)
+
+
+def test_an_exception_in_the_residual_propagates():
+    class Stop(Exception):
+        pass
+
+    calls = []
+
+    def resid(z):
+        calls.append(1)
+        if len(calls) > 3:
+            raise Stop
+        return np.array([z[0] - 1.0, z[1] + 1.0])
+
+    with pytest.raises(Stop):
+        bounded_lm(resid, [0.0, 0.0], [-5.0, -5.0], [5.0, 5.0])
+
+
+def test_the_module_imports_numpy_only():
+    path = Path(__file__).resolve().parents[1] / "ident" / "least_squares.py"
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module.split(".")[0])
+    assert names <= {"numpy", "__future__", "dataclasses"}
