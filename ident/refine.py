@@ -18,8 +18,8 @@ constraint region.  A projected Levenberg–Marquardt with a finite-difference J
 (:func:`ident.least_squares.bounded_lm`; or, on request, ``scipy.optimize.least_squares``'
 trust-region reflective method) does the search on a coarser simulator (``substeps_search``
 friction sub-steps; the linear part is exact either way) and on every k-th residual; the
-before/after fit is computed with the default simulator on all samples.  The refined model is returned only if it improves the
-fit of the (bounded) starting model.
+before/after fit is computed with the default simulator on all samples.  The refined
+model is returned only if it improves the fit of the (bounded) starting model.
 """
 
 from __future__ import annotations
