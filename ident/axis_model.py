@@ -20,7 +20,6 @@ were fitted in.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
@@ -106,46 +105,17 @@ class AxisModel:
     # -- the augmented simulator's arrays ----------------------------------------------
     def spec_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(θ, flags, ep, modes) in the layout of :mod:`ident.diagnosis.augmented`."""
-        from ident.diagnosis.augmented import EFFECTS, N_EP
+        from ident.diagnosis.augmented import EFFECTS, N_EP, N_MODES
+        from ident.diagnosis.effects import EFFECT_MODELS
 
         theta = np.array([getattr(self.model, k) for k in BASE_KEYS], dtype=float)
         flags = np.array([1 if e in self.effects else 0 for e in EFFECTS], dtype=np.int64)
         ep = np.zeros(N_EP)
-        modes = np.zeros(5, dtype=np.int64)
+        modes = np.zeros(N_MODES, dtype=np.int64)
         modes[4] = 1 if self.controller == "sampled" else 0
-        fx = self.effects
-        if "backlash" in fx:
-            p = fx["backlash"]
-            ep[0] = p["gap_mm"]
-            if p.get("loop") == "table_fed_back":
-                modes[0] = 1
-                ep[11] = p.get("motor_fraction", 0.5)
-                ep[12] = p.get("position_motor_share", 0.0)
-        if "stribeck" in fx:
-            p = fx["stribeck"]
-            ep[1], ep[2] = p["static_to_coulomb_ratio"], p["stribeck_velocity_mm_s"]
-        if "resonance" in fx:
-            p = fx["resonance"]
-            ep[3], ep[4] = p["freq_hz"], p["damping"]
-            if p.get("kind") == "two_mass":
-                modes[3] = 1
-                ep[11] = p.get("motor_fraction", 0.5)
-            else:
-                ep[5] = p.get("gain", 1.0)
-        if "time_delay" in fx:
-            p = fx["time_delay"]
-            ep[6] = p["delay_s"]
-            modes[1] = 1 if p.get("where") == "actuation" else 0
-        if "cyclic_error" in fx:
-            p = fx["cyclic_error"]
-            ep[7] = p["period_mm"]
-            phase = p.get("phase_rad", 0.0)
-            ep[8], ep[9] = p["amplitude"] * math.cos(phase), p["amplitude"] * math.sin(phase)
-            modes[2] = 1 if p.get("kind") == "disturbance" else 0
-        if "saturation" in fx:
-            p = fx["saturation"]
-            ep[10] = p["limit"]
-            ep[12] = p.get("position_motor_share", ep[12])
+        for name in EFFECTS:  # in the simulator's order: effects may share a slot (ψ)
+            if name in self.effects:
+                EFFECT_MODELS[name].set_arrays(self.effects[name], ep, modes)
         return theta, flags, ep, modes
 
     # -- edits and JSON ------------------------------------------------------------------

@@ -24,8 +24,11 @@ CASES = json.loads((FIX / "cases.json").read_text()) if (FIX / "cases.json").exi
 
 # Classes the current augmented models do not yet recover on the virtual CNC (see
 # docs/diagnosis.md, "Known misses"); kept as strict xfails so a fix shows up at once.
-# Empty since resonance and dead time are also fitted on the sampled controller.
-KNOWN_MISSES: set[str] = set()
+# Backlash and resonance since the one general search replaced the restarts tuned to
+# single seeds (velocity-gain restarts, every-start backlash fits, the preference for a
+# mode at the spectrum peak): the gap is found at 0.037 of 0.05 mm and falls short of the
+# χ² threshold (LR 9.3 / 11.0); the mode is fitted at 300 Hz instead of 100 Hz.
+KNOWN_MISSES: set[str] = {"backlash", "resonance"}
 
 
 def load(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:

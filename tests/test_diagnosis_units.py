@@ -253,13 +253,13 @@ def _actuation_delay_recording(x_r: np.ndarray, delay_s: float):
     return make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
 
 
-def test_delay_profile_recovers_an_actuation_dead_time_on_the_sampled_controller(x_r):
-    from ident.diagnosis.candidates import fit_delay_profile
+def test_the_search_recovers_an_actuation_dead_time_on_the_sampled_controller(x_r):
+    from ident.diagnosis.candidates import search
 
     chunk = _actuation_delay_recording(x_r, 0.0013)
     start = ModelSpec(THETA.copy())
     start.modes[4] = 1
-    fitted = fit_delay_profile(start, chunk)
+    fitted = search(start, "time_delay", chunk, {})
     assert fitted.modes[1] == 1  # actuation, not capture
     assert fitted.ep[EP_INDEX["delay_s"]] == pytest.approx(0.0013, rel=0.1)
 
@@ -344,7 +344,7 @@ def _two_mass_recording(x_r: np.ndarray, freq_hz: float) -> np.ndarray:
 
 
 def test_a_mode_started_at_the_residual_spectrum_peak_is_found_there(x_r):
-    from ident.diagnosis.candidates import fit_resonance_at_peaks, resonance_at_peak
+    from ident.diagnosis.candidates import search
 
     x = _two_mass_recording(x_r, 120.0)
     chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
@@ -353,27 +353,25 @@ def test_a_mode_started_at_the_residual_spectrum_peak_is_found_there(x_r):
     # the closed-loop peak of a two-mass mode lies a little below its free-free frequency
     evidence = {"spectrum_peaks": [{"freq_hz": 4.0, "share_above_20_hz": 0.0},
                                    {"freq_hz": 110.0, "share_above_20_hz": 0.3}]}
-    fitted = fit_resonance_at_peaks(base, chunk, evidence)
-    assert fitted is not None
+    fitted = search(base, "resonance", chunk, evidence)
     assert fitted.ep[EP_INDEX["freq_hz"]] == pytest.approx(120.0, rel=0.05)
     assert sse(fitted, chunk) < 0.01 * sse(base, chunk)
-    assert resonance_at_peak(fitted, evidence["spectrum_peaks"], Ts)
-    # a peak holding little of the high-frequency residual power is no reason to look for a mode
-    weak = {"spectrum_peaks": [{"freq_hz": 110.0, "share_above_20_hz": 0.05}]}
-    assert fit_resonance_at_peaks(base, chunk, weak) is None
 
 
-def test_a_damped_or_unseen_mode_is_not_taken_for_a_resonance():
-    from ident.diagnosis.candidates import resonance_at_peak
+def test_a_resonance_is_a_lightly_damped_mode_below_nyquist_by_definition():
+    from ident.diagnosis.config import DEFAULT
+    from ident.diagnosis.effects import EFFECT_MODELS
 
-    peaks = [{"freq_hz": 100.0, "share_above_20_hz": 0.3}]
+    res = EFFECT_MODELS["resonance"]
     spec = ModelSpec(THETA.copy(), ("resonance",))
     spec.modes[3] = 1
-    spec.ep[EP_INDEX["motor_fraction"]] = 0.8
-    for f, zeta, seen in ((105.0, 0.02, True), (105.0, 0.4, False), (300.0, 0.02, False)):
+    for f, zeta, ok in ((105.0, 0.02, True), (105.0, 0.4, False), (600.0, 0.02, False)):
         spec.ep[EP_INDEX["freq_hz"]] = f
         spec.ep[EP_INDEX["damping"]] = zeta
-        assert resonance_at_peak(spec, peaks, Ts) is seen
+        assert (res.implausible(spec, Ts) == "") is ok
+    # and the fit cannot leave that definition: the damping's bound is the same figure
+    chunk = make_chunk(np.linspace(0, 1, 300), np.linspace(0, 1, 300), Ts, segment_starts(300, None))
+    assert res.bounds("damping", 0.05, chunk, DEFAULT)[1] == DEFAULT.max_mode_damping
 
 
 def test_regression_with_the_delay_starts_near_the_true_gains(x_r):
@@ -409,7 +407,7 @@ def test_a_backlash_gap_started_off_by_half_moves_to_the_true_gap(x_r, start_gap
     start.effects = ("backlash",)
     start.ep[EP_INDEX["gap_mm"]] = start_gap_mm
     start.ep[EP_INDEX["motor_fraction"]] = 0.75
-    start.modes[:] = modes
+    start.modes[: modes.size] = modes
     fitted = fit_spec(start, chunk)
     assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.06, rel=0.05)
     assert sse(fitted, chunk) < 0.01 * sse(start, chunk)

@@ -25,14 +25,19 @@ stribeck        breakaway friction ``r·d`` at rest falling to Coulomb ``d`` wit
                 v_s = stribeck_velocity_mm_s [2]
 resonance       a lightly damped pole pair, freq_hz [3], damping ζ [4]: mode 0 a filter on the
                 recorded position ``q̈ + 2ζω q̇ + ω² q = −κ·ẍ``, recorded x + q, gain κ [5];
-                mode 1 the two-mass drive above with a spring-damper of that free-free mode
+                mode 1 the two-mass drive above with a spring-damper of that free-free mode;
+                mode 2 the same drive semi-closed: every loop term reads the motor, the
+                table is recorded (a table scale read beside a motor-encoder loop)
 time_delay      dead time ``delay_s`` [6] on the recorded position (mode 0: capture/transport)
                 or on the control-equivalent acceleration inside the loop (mode 1)
 cyclic_error    ``c_s·sin(2πx/P) + c_c·cos(2πx/P)``, period_mm P [7], c_s [8], c_c [9]; an error
                 of the recorded position in mm (mode 0) or a disturbance in mm/s² (mode 1)
-saturation      ``u`` clipped to ``±limit`` mm/s² [10], integral frozen while it would wind up;
-                with ψ [12] > 0 the position term's motor share is the integral of the
-                motor velocity and freezes with it (P-PI: the velocity integral stops)
+saturation      ``u`` clipped to ``±limit`` mm/s² [10].  Mode 0: integral frozen while it would
+                wind up (conditional integration); with ψ [12] > 0 the position term's
+                motor share is the integral of the motor velocity and freezes with it
+                (P-PI: the velocity integral stops).  Mode 1: no anti-windup — the
+                integral runs on while the output is clipped, as in many drives' PI
+                velocity loops, and overshoots once the limit lets go
 ==============  =========================================================================
 
 Sampled controller (``modes[4] = 1``): ``u`` is computed once per sample from the positions
@@ -62,6 +67,8 @@ __all__ = [
     "EFFECTS",
     "EP_INDEX",
     "N_EP",
+    "MODE_SLOTS",
+    "N_MODES",
     "command_derivatives",
     "segment_starts",
     "substeps",
@@ -94,6 +101,11 @@ EP_INDEX: dict[str, int] = {
     "position_motor_share": 12,
 }
 N_EP = 13
+#: Variant slots of the ``modes`` vector: backlash, time_delay, cyclic_error, resonance,
+#: controller (0 continuous, 1 sampled), saturation (0 anti-windup, 1 none).
+MODE_SLOTS: dict[str, int] = {"backlash": 0, "time_delay": 1, "cyclic_error": 2, "resonance": 3,
+                              "controller": 4, "saturation": 5}
+N_MODES = 6
 #: Frequency of the motor–table contact of a backlash gap in the two-mass variant, Hz.
 CONTACT_HZ = 400.0
 
@@ -200,8 +212,11 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
     lim = ep[10]
     mu = ep[11] if ep[11] > 0.0 else 1.0
     psi = ep[12]
+    sa_windup = on_sa and modes[5] == 1
     bl_loop = on_bl and modes[0] == 1
-    rs_two = on_rs and modes[3] == 1
+    rs_two = on_rs and modes[3] >= 1
+    # semi-closed two-mass drive: every loop term reads the motor, the table is recorded
+    fb_motor = rs_two and modes[3] == 2
     two = bl_loop or rs_two
     if two:
         # two-mass drive: motor (share mu of J) and table coupled by a spring-damper whose
@@ -267,12 +282,12 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
             f = j / nsub
             xrj = xr[k] + f * (xr[k + 1] - xr[k])
             vrj = vr[k] + f * (vr[k + 1] - vr[k])
-            xfb = xt if two else xm
+            xfb = xt if (two and not fb_motor) else xm
             # two-mass: the position term may read the motor in part (a P-PI cascade's velocity
             # integral is the motor position), the integral term always reads the table
             # xw: the motor position as the integral of its velocity, frozen with the integral
             # while saturated (a P-PI cascade's velocity integral winds no further)
-            xp = (1.0 - psi) * (xt if two else xm) + psi * xw
+            xp = (1.0 - psi) * xfb + psi * xw
             if sampled:
                 # digital controller: u computed at the sample from the positions read then
                 # (velocity by backward difference of the motor position), held over Ts (ZOH)
@@ -287,10 +302,10 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
                         ig = xr[k] - xfb if psi == 0.0 else a3 * (xr[k] - xfb) - psi * a2 * vfb
                         if u_h > lim:
                             u_h = lim
-                            wind_h = ig <= 0.0
+                            wind_h = sa_windup or ig <= 0.0
                         elif u_h < -lim:
                             u_h = -lim
-                            wind_h = ig >= 0.0
+                            wind_h = sa_windup or ig >= 0.0
                     if wind_h:
                         ei = ei_new
                     # semi-implicit Euler keeps velocities at half sub-steps: the first
@@ -312,10 +327,10 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
                     ig = xrj - xfb if psi == 0.0 else a3 * (xrj - xfb) - psi * a2 * v
                     if u > lim:
                         u = lim
-                        wind = ig <= 0.0  # conditional integration (anti-windup)
+                        wind = sa_windup or ig <= 0.0  # conditional integration (anti-windup)
                     elif u < -lim:
                         u = -lim
-                        wind = ig >= 0.0
+                        wind = sa_windup or ig >= 0.0
                     wind_x = wind
             if j == 0:
                 out_u[k] = u
@@ -430,12 +445,12 @@ def simulate_augmented(
         1 for each effect of :data:`EFFECTS` that is switched on.
     ep : ndarray (13,)
         Effect parameters laid out as :data:`EP_INDEX`.
-    modes : ndarray of int (5,)
+    modes : ndarray of int (6,)
         Variant of backlash (0 semi-closed loop, 1 two-mass full-closed loop), time delay
         (0 capture, 1 actuation), cyclic error (0 position error, 1 disturbance),
-        resonance (0 filter on the recorded position, 1 two-mass mode inside the loop) and
-        controller (0 continuous, 1 sampled with zero-order hold); shorter arrays are
-        padded with zeros.
+        resonance (0 filter on the recorded position, 1 two-mass mode inside the loop),
+        controller (0 continuous, 1 sampled with zero-order hold) and saturation (0
+        anti-windup, 1 none), slots :data:`MODE_SLOTS`; shorter arrays are padded with zeros.
     starts : ndarray of bool (N,)
         First sample of each segment (see :func:`segment_starts`); default one segment.
     derivs : (ẋ_r, ẍ_r), optional
@@ -454,14 +469,14 @@ def simulate_augmented(
     th = np.ascontiguousarray(theta, dtype=float)
     fl = np.zeros(6, dtype=np.int64) if flags is None else np.ascontiguousarray(flags, dtype=np.int64)
     e = np.zeros(N_EP) if ep is None else np.ascontiguousarray(ep, dtype=float)
-    md = np.zeros(5, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
-    if md.size < 5:
-        md = np.concatenate([md, np.zeros(5 - md.size, dtype=np.int64)])
+    md = np.zeros(N_MODES, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
+    if md.size < N_MODES:
+        md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
     if not (np.all(np.isfinite(th)) and np.all(np.isfinite(e))) or e[6] < 0.0 or e[6] > 1.0:
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:
         f = e[3] if fl[2] else 0.0
-        if fl[0] and md[0] == 1 and not (fl[2] and md[3] == 1):
+        if fl[0] and md[0] == 1 and not (fl[2] and md[3] >= 1):
             f = max(f, CONTACT_HZ)
         nsub = substeps(th, Ts, f)
     out = np.empty(n)

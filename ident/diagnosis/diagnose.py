@@ -6,14 +6,17 @@
 1. **compares** them in free run (SPEC §5): residual ``r = e − ê``; against a simulated
    recording of the same program when ``against`` is given;
 2. **locates** where ``r`` concentrates (:func:`ident.diagnosis.residuals.localise`);
-3. **explains and models**: for each effect of SPEC §7 a signature test on that evidence
-   and an augmented model fitted by output error (:mod:`ident.diagnosis.candidates`);
+3. **explains and models**: for each effect of SPEC §7 (an object of
+   :mod:`ident.diagnosis.effects`) an augmented model fitted by the one output-error search
+   of :mod:`ident.diagnosis.candidates`, started where that evidence points, on top of the
+   base — eq. 3.3 with a continuous or a sampled control law, whichever fits better (starts
+   on both: an effect may have its valley on the other only);
    each is scored on held-out data — the validation recording when given, otherwise
    two-fold cross-validation over the halves of every segment — against the base model
    re-fitted by the same procedure, so re-fitting alone earns nothing;
 4. **accepts** an effect by one statistical rule (:func:`evidence`): the held-out
    likelihood ratio over the effective number of independent samples exceeds the χ²
-   quantile of the parameters it adds (``ALPHA``), it removes at least ``MIN_RELEVANT`` of
+   quantile of the parameters it adds (``config.alpha``), it removes at least ``config.min_relevant`` of
    the held-out residual, and its parameters are the physics its name means
    (:func:`_plausible`: size bounds, no signature veto); the effect with the largest
    likelihood ratio wins; greedy forward selection then tries a second one on top by the
@@ -36,45 +39,15 @@ import numpy as np
 
 from core.errors import InputError
 from ident.diagnosis.augmented import EFFECTS, segment_starts
-from ident.diagnosis.candidates import (
-    LONG_S,
-    PARAM_COUNT,
-    Chunk,
-    ModelSpec,
-    effect_parameters,
-    fit_effect,
-    fit_spec,
-    make_chunk,
-    residual,
-    sampled_base,
-    simulate_spec,
-    softened_base,
-    sse,
-)
+from ident.diagnosis.candidates import fit_spec, sampled_base, search, softened_base
+from ident.diagnosis.config import DEFAULT, DiagnosisConfig
+from ident.diagnosis.effects import EFFECT_MODELS, effect_parameters
+from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
 
-__all__ = ["Candidate", "Diagnosis", "diagnose", "MIN_GAIN", "PER_PARAM"]
+__all__ = ["Candidate", "Diagnosis", "diagnose"]
 
-#: The acceptance rule (one criterion for every effect, :func:`evidence`): an effect is
-#: accepted when the likelihood ratio of the held-out residuals with and without it,
-#: counted over the effective number of independent samples, exceeds the χ² quantile of
-#: the parameters it adds at this significance level (a 5 % family-wise error,
-#: Bonferroni-divided over the six effects tried) …
-ALPHA = 0.05 / 6
-#: … and it removes at least this share of the held-out residual norm (below that an
-#: effect is statistically real but too small to matter for a virtual machine).
-MIN_RELEVANT = 0.03
-#: Minimum share of the held-out residual norm a described external load must remove …
-MIN_GAIN = 0.04
-#: … plus this much per parameter it adds (the penalty for added parameters).
-PER_PARAM = 0.01
-#: The held-out residual rms of the base model must exceed this many times the noise floor.
-NOISE_FACTOR = 3.0
-#: A fitted backlash gap below this (mm) is below the resolution a CNC axis measures
-#: position with (1 µm scales and encoders): not a gap the data can show.  Whether a larger
-#: one matters is the acceptance rule's question.
-MIN_GAP_MM = 0.001
 _BASE_KEYS = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
 
 
@@ -249,7 +222,8 @@ class _Scored:
             return [float(r @ r) if np.all(np.isfinite(r)) else math.inf for r in self.raw_r]
 
 
-def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold, scored) -> "_Scored":
+def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold, scored,
+                    cfg: DiagnosisConfig = DEFAULT) -> "_Scored":
     """The reference model (effects ``keep`` only) with the lowest training cost per fold.
 
     Candidates for the reference: the given one (``scs[0]``) and a re-fit of it started
@@ -264,7 +238,7 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold
     def refit(i: int, s0: ModelSpec):
         s0 = s0.copy()
         s0.effects = tuple(e for e in s0.effects if e in keep)
-        return fit_spec(s0, folds[i][0], max_iter=15)
+        return fit_spec(s0, folds[i][0], max_iter=cfg.reference_iter)
 
     jobs = [(i, pool.submit(refit, i, sc.specs[i])) for sc in scs[1:] for i in range(len(folds))]
     best = list(ref.specs)
@@ -359,17 +333,17 @@ def correlation_time(r: np.ndarray) -> float:
     return float(min(max(tau, 1.0), n / 4.0))
 
 
-def evidence(sc: "_Scored", ref: "_Scored", k: int) -> dict:
+def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAULT) -> dict:
     """The acceptance criterion: held-out likelihood ratio against its χ² threshold.
 
     For Gaussian residuals the log-likelihood ratio of two models is ``n·ln(SSE_ref/SSE)``;
     tracking-error residuals are strongly coloured, so ``n`` is the effective number of
     independent samples, ``N/τ`` per fold with τ the correlation time of the augmented
     model's residual (:func:`correlation_time`).  The statistic is compared with the
-    ``1 − ALPHA/2`` quantile of χ² with ``k`` degrees of freedom (k = parameters the
+    ``1 − alpha/2`` quantile (``cfg.alpha``) of χ² with ``k`` degrees of freedom (k = parameters the
     effect adds).  It is taken on the held-out residual in mm (the SPEC §5 metric) and on
     the weighted one (the low-speed set heard next to the high-speed set, as the fits
-    weigh it), the larger counting — hence ALPHA/2 —, never credited when the residual in
+    weigh it), the larger counting — hence alpha/2 —, never credited when the residual in
     mm grows.
     """
     from scipy.stats import chi2
@@ -388,62 +362,25 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int) -> dict:
 
     (lr_raw, ne_raw), (lr_w, ne_w) = one(sc.raw_r, ref.raw_r), one(sc.test_r, ref.test_r)
     lr, n_eff = (lr_raw, ne_raw) if lr_raw >= lr_w else (lr_w, ne_w)
-    threshold = float(chi2.ppf(1.0 - ALPHA / 2, max(k, 1)))
+    threshold = float(chi2.ppf(1.0 - cfg.alpha / 2, max(k, 1)))
     raw_ok = sc.raw_sse < ref.raw_sse
     return {"likelihood_ratio": float(lr), "threshold": threshold, "effective_samples": float(n_eff),
             "significant": bool(lr > threshold and raw_ok)}
 
 
-def _plausible(eff: str, sc: "_Scored", loc: dict, Ts: float) -> tuple[bool, str]:
-    """Is the fitted effect, in every fold, the physics its name means — of a size that counts?
-
-    Not a signature test (those only order and start the fits): each bound is part of the
-    effect's definition in SPEC §7.  A gap below ``MIN_GAP_MM`` or a breakaway within 20 %
-    of Coulomb friction is no effect at the scale eq. 3.3 resolves; a "resonance" is a
-    lightly damped mode below Nyquist; a dead time shorter than the lag a digital loop has
-    anyway (the sample of hold and backward-difference velocity the continuous eq. 3.3
-    turns into a delay) is the controller, not a delay.
-    """
-    from ident.diagnosis.candidates import MAX_MODE_DAMPING
-
+def _plausible(eff: str, sc: "_Scored", Ts: float, cfg: DiagnosisConfig = DEFAULT) -> tuple[bool, str]:
+    """Is the fitted effect, in every fold, the physics its name means (:meth:`Effect.implausible
+    <ident.diagnosis.effects.Effect.implausible>`: part of its definition, not a signature test)?"""
     for spec in sc.specs:
-        p = effect_parameters(spec, eff)
-        if eff == "backlash" and p["gap_mm"] < MIN_GAP_MM:
-            return False, f"gap below {1e3 * MIN_GAP_MM:.0f} µm"
-        if eff == "stribeck" and p["static_to_coulomb_ratio"] < 1.2:
-            return False, "breakaway within 20 % of Coulomb friction"
-        if eff == "resonance" and (p["damping"] > MAX_MODE_DAMPING or p["freq_hz"] > 0.45 / Ts):
-            return False, f"not a lightly damped mode (ζ = {p['damping']:.2f}, {p['freq_hz']:.0f} Hz)"
-        if eff == "time_delay" and p["delay_s"] < (0.5 * Ts if spec.modes[4] else Ts):
-            return False, "delay within the lag a digital loop has anyway"
+        why = EFFECT_MODELS[eff].implausible(spec, Ts, cfg)
+        if why:
+            return False, why
     return True, ""
 
 
 def _signatures(loc: dict) -> dict[str, dict]:
     """Per effect, the localisation figures that would betray it (SPEC §7 signatures)."""
-
-    def conc(share: str, time_share: str) -> float:
-        t = loc.get(time_share, 0.0)
-        return float(loc.get(share, 0.0) / t) if t > 0 else 0.0
-
-    peaks = loc.get("spectrum_peaks", [])
-    top = peaks[0] if peaks else {"freq_hz": 0.0, "power_share": 0.0, "prominence": 0.0}
-    per = loc.get("position_periodic", {})
-    wh = loc.get("whiteness", {})
-    return {
-        "backlash": {"after_reversal_30ms_share": loc.get("after_reversal_30ms_share", 0.0),
-                     "concentration": conc("after_reversal_30ms_share", "after_reversal_30ms_time_share")},
-        "stribeck": {"low_speed_share": loc.get("low_speed_share", 0.0) + loc.get("at_rest_share", 0.0),
-                     "concentration": conc("low_speed_share", "low_speed_time_share")},
-        "resonance": {"peak_freq_hz": top["freq_hz"], "peak_power_share": top["power_share"],
-                      "prominence": top["prominence"]},
-        "time_delay": {"cross_correlation_peak": wh.get("cross_correlation_peak", 0.0),
-                       "lag_samples": wh.get("cross_correlation_peak_lag_samples", 0)},
-        "cyclic_error": {"period_mm": per.get("period_mm", 0.0), "explained_share": per.get("explained_share", 0.0),
-                         "median_share": per.get("median_share", 0.0)},
-        "saturation": {"high_acceleration_share": loc.get("high_acceleration_share", 0.0),
-                       "concentration": conc("high_acceleration_share", "high_acceleration_time_share")},
-    }
+    return {name: e.signature(loc) for name, e in EFFECT_MODELS.items()}
 
 
 def _where_words(loc: dict) -> str:
@@ -499,24 +436,7 @@ def _validation_where_words(loc: dict, dist: dict | None) -> str:
 
 
 def _param_words(effect: str, p: dict) -> str:
-    if effect == "backlash":
-        return f"backlash, gap {p['gap_mm']:.3g} mm"
-    if effect == "stribeck":
-        return (f"Stribeck friction, static/Coulomb {p['static_to_coulomb_ratio']:.2g}, "
-                f"Stribeck velocity {p['stribeck_velocity_mm_s']:.2g} mm/s")
-    if effect == "resonance":
-        return f"resonance at {p['freq_hz']:.1f} Hz, damping {p['damping']:.3f}"
-    if effect == "time_delay":
-        words = f"time delay {1e3 * p['delay_s']:.2f} ms ({p['where']}"
-        lo, hi = p.get("delay_range_s", (p["delay_s"], p["delay_s"]))
-        if hi > 1.15 * lo:  # a weakly determined delay: say which ones fit as well
-            words += f"; {1e3 * lo:.2f}–{1e3 * hi:.2f} ms fit equally well"
-        return words + ")"
-    if effect == "cyclic_error":
-        return f"cyclic error, period {p['period_mm']:.3g} mm, amplitude {p['amplitude']:.3g} {p['amplitude_unit']}"
-    if effect == "saturation":
-        return f"saturation, limit {p['limit']:.4g} mm/s²"
-    return effect
+    return EFFECT_MODELS[effect].words(p) if effect in EFFECT_MODELS else effect
 
 
 def diagnose(
@@ -530,6 +450,7 @@ def diagnose(
     against: np.ndarray | None = None,
     effects: tuple[str, ...] = EFFECTS,
     progress: Callable[[str], None] | None = None,
+    config: DiagnosisConfig | None = None,
 ) -> Diagnosis:
     """Diagnose the mismatch between a recording of one axis and its drive model.
 
@@ -551,6 +472,7 @@ def diagnose(
     effects : the effects of SPEC §7 to try (all by default).
     progress : called with a short description of each stage as it starts (for a
         progress line; the diagnosis takes seconds).
+    config : the tunables (:class:`ident.diagnosis.config.DiagnosisConfig`); default ``DEFAULT``.
 
     Raises
     ------
@@ -558,6 +480,7 @@ def diagnose(
         Mismatched or too short arrays, NaN, a command that never moves, a bad model.
     """
     t0 = time.perf_counter()
+    cfg = config or DEFAULT
     if not (isinstance(Ts, (int, float)) and math.isfinite(Ts) and Ts > 0):
         raise InputError(f"sample period must be a positive number of seconds, got {Ts!r}")
     x_r, x = _check("recording", x_r, x, segment)
@@ -573,6 +496,14 @@ def diagnose(
     # 1. compare: the base model re-fitted in free run on all identification data
     # (twice: the restart re-scales the parameters after a long first move)
     base = fit_base(ModelSpec(theta), full)
+    # the base model is eq. 3.3 with a continuous control law or the same law sampled and
+    # held (a digital drive): whichever fits the identification recording better in free
+    # run, once, for every candidate on top of it
+    sampled = sampled_base(base, full)
+    if sse(sampled, full) < sse(base, full):
+        base, other = sampled, base
+    else:
+        other = sampled
     x_hat0 = simulate_spec(base, full)
     if against is not None:
         against = np.asarray(against, dtype=float).ravel()
@@ -601,7 +532,7 @@ def diagnose(
     else:
         first, second = _fold_masks(starts)
         folds = [(full.scored(first), full.scored(second))]
-        if x_r.size * Ts <= LONG_S:
+        if x_r.size * Ts <= cfg.long_s:
             folds.append((full.scored(second), full.scored(first)))
             scheme = "two-fold cross-validation over interleaved blocks"
         else:  # long recordings: one fold keeps the diagnosis within its time budget
@@ -616,7 +547,7 @@ def diagnose(
         loc_val["fit_pct"] = _fit_pct(te0.x_r - te0.x, r_val)
         disturbance["validation"] = _disturbance(base, te0)
     # long recordings: only the best other effect is tried as a second one (time budget)
-    long_rec = x_r.size * Ts > LONG_S
+    long_rec = x_r.size * Ts > cfg.long_s
     e_test = np.concatenate([te.x_r[te.score] - te.x[te.score] for _, te in folds])
     pool = ThreadPoolExecutor(max_workers=2)
 
@@ -646,15 +577,10 @@ def diagnose(
         current_sc, accepted = base_sc, []
         best_name, best_gain = None, 0.0
         # every (effect, fold) fit is independent: spread them over the worker threads
-        # resonance and dead time are also tried on the sampled controller: its base is fitted
-        # once per fold, first, and those two effects are queued last so the others run meanwhile
-        samp = [pool.submit(sampled_base, base_sc.specs[i], tr) for i, (tr, _te) in enumerate(folds)]
-
         def fit_one(eff: str, i: int, tr: Chunk) -> ModelSpec:
-            return fit_effect(base_sc.specs[i], eff, tr, loc, sampled=samp[i].result())
+            return search(base_sc.specs[i], eff, tr, loc, cfg, others=(other,))
 
-        order = sorted(effects, key=lambda e: e in ("resonance", "time_delay"))
-        jobs = {(eff, i): pool.submit(fit_one, eff, i, tr) for eff in order for i, (tr, _te) in enumerate(folds)}
+        jobs = {(eff, i): pool.submit(fit_one, eff, i, tr) for eff in effects for i, (tr, _te) in enumerate(folds)}
         say(f"fitting {len(effects)} effects")
         for k, eff in enumerate(effects):
             singles[eff] = scored([jobs[(eff, i)].result() for i in range(len(folds))])
@@ -663,26 +589,26 @@ def diagnose(
         # carried the base parameters into a better one.  Re-fit the base model from every
         # candidate's base parameters (effect removed) and compare with the best base found,
         # so an effect is credited only with what the effect itself explains.
-        base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, per_fold, scored)
+        base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, per_fold, scored, cfg)
         current_sc = base_sc
         # nothing to explain when the held-out residual is at the measurement noise (SPEC §7 "none")
         n_test = sum(r.size for r in base_sc.raw_r)
         base_rms = math.sqrt(base_sc.raw_sse / max(n_test, 1))
-        above_noise = base_rms > NOISE_FACTOR * noise
+        above_noise = base_rms > cfg.noise_factor * noise
         loc["noise_floor_mm"] = noise
         loc["held_out_rms_mm"] = base_rms
         for eff in effects:
             sc = singles[eff]
             gain, folds_ok, _gw = _gain(sc, base_sc)
-            ev = evidence(sc, base_sc, PARAM_COUNT[eff])
-            plaus, why = _plausible(eff, sc, loc, Ts)
+            ev = evidence(sc, base_sc, EFFECT_MODELS[eff].added, cfg)
+            plaus, why = _plausible(eff, sc, Ts, cfg)
             if not above_noise:
                 plaus, why = False, f"held-out residual {1e3 * base_rms:.3f} µm is at the noise floor"
-            ok = ev["significant"] and gain >= MIN_RELEVANT and plaus
+            ok = ev["significant"] and gain >= cfg.min_relevant and plaus
             rank = ev["likelihood_ratio"]
             if ok and rank > best_gain:
                 best_name, best_gain = eff, rank
-            candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, MIN_RELEVANT, folds_ok,
+            candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
                                          sigs, [], why, base_sc.raw_rms, ev))
         # 4. greedy forward selection: the best single effect, then a second on top of it
         if best_name is not None:
@@ -694,23 +620,23 @@ def diagnose(
             best2, best2_gain, best2_sc = None, 0.0, None
             round2 = []
             say(f"trying a second effect on top of {best_name}")
-            jobs = {(eff, i): pool.submit(fit_effect, current_sc.specs[i], eff, tr, loc)
+            jobs = {(eff, i): pool.submit(search, current_sc.specs[i], eff, tr, loc, cfg)
                     for eff in others for i, (tr, _te) in enumerate(folds)}
             pairs = {eff: scored([jobs[(eff, i)].result() for i in range(len(folds))]) for eff in others}
             if pairs:
                 current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, per_fold,
-                                             scored)
+                                             scored, cfg)
             for eff, sc in pairs.items():
                 gain, folds_ok, _gw = _gain(sc, current_sc)
-                ev = evidence(sc, current_sc, PARAM_COUNT[eff])
-                plaus, why = _plausible(eff, sc, loc, Ts)
-                ok = ev["significant"] and gain >= MIN_RELEVANT and plaus
+                ev = evidence(sc, current_sc, EFFECT_MODELS[eff].added, cfg)
+                plaus, why = _plausible(eff, sc, Ts, cfg)
+                ok = ev["significant"] and gain >= cfg.min_relevant and plaus
                 round2.append((eff, sc, gain, folds_ok, ok, why, ev))
                 if ok and ev["likelihood_ratio"] > best2_gain:
                     best2, best2_gain, best2_sc = eff, ev["likelihood_ratio"], sc
             for eff, sc, gain, folds_ok, ok, why, ev in round2:
                 candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
-                                             MIN_RELEVANT, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev))
+                                             cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev))
             if best2 is not None:
                 accepted.append(best2)
                 current_sc = best2_sc
@@ -718,7 +644,7 @@ def diagnose(
         pool.shutdown()
 
     # 5. a load the motion does not cause: described, and added as an input where it is
-    external = _external_force(base, full, folds[0][1] if validation is not None else None, disturbance)
+    external = _external_force(base, full, folds[0][1] if validation is not None else None, disturbance, cfg)
     if external is not None:
         candidates.append(external)
     say("final fit")
@@ -797,14 +723,15 @@ def _disturbance(spec: ModelSpec, chunk: Chunk) -> dict:
     return analyse_disturbance(w, chunk.x_r, chunk.x, *chunk.derivs, chunk.Ts, chunk.starts)
 
 
-def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance: dict) -> Candidate | None:
+def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance: dict,
+                    cfg: DiagnosisConfig = DEFAULT) -> Candidate | None:
     """The ``external_force`` candidate when the disturbance comes in time blocks the motion does not explain.
 
     Looked for on the recording where the model fails on held-out data (the validation
     recording when given).  A time-localised load cannot be predicted on another
     recording; it is *described*, and added as a known input to that recording's
     simulation to show how much of the mismatch it explains.  Accepted when it removes at
-    least ``MIN_GAIN + PER_PARAM·k`` of the residual norm, k = 2 parameters per block.
+    least ``cfg.min_gain + cfg.per_param·k`` of the residual norm, k = 2 parameters per block.
 
     The load's effect is the difference of two free runs of eq. 3.3 (``ident.simulation``)
     that differ only by the input; it is added to the diagnosis's own free-run residual of
@@ -833,7 +760,7 @@ def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance
         r1 = r0 + effect
     n0, n1 = float(np.linalg.norm(r0)), float(np.linalg.norm(r1))
     gain = 1.0 - n1 / n0 if n0 > 0 and np.isfinite(n1) else -math.inf
-    need = MIN_GAIN + PER_PARAM * 2 * len(analysis["blocks"])
+    need = cfg.min_gain + cfg.per_param * 2 * len(analysis["blocks"])
     blocks = analysis["blocks"]
     params = {"force": float(np.median([abs(b["mean_mm_s2"]) for b in blocks])), "force_unit": "mm/s^2",
               "times": [[b["t_start_s"], b["t_end_s"]] for b in blocks], "recording": name}
@@ -859,7 +786,7 @@ def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gai
         "held_out_residual_reduction": float(gain),
         "required_reduction": float(need),
         "improves_every_fold": bool(folds_ok),
-        "parameters_added": PARAM_COUNT[eff],
+        "parameters_added": EFFECT_MODELS[eff].added,
         "signature": sigs.get(eff, {}),
         "size_test": "passed" if not implausible else f"failed: {implausible}",
         **(ev or {}),

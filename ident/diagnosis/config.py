@@ -1,0 +1,92 @@
+"""Every tunable of the diagnosis in one place, each with the reason for its value.
+
+:class:`DiagnosisConfig` is passed to :func:`ident.diagnosis.diagnose` (``config=``); the
+module-level :data:`DEFAULT` is what the CLI and the Python API use.  Nothing here was
+fitted to a benchmark case: the acceptance figures are statistical conventions or the
+resolution a CNC axis measures with; the search figures trade time against the chance of
+missing a valley and are the same for every effect.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["DiagnosisConfig", "DEFAULT"]
+
+
+@dataclass(frozen=True)
+class DiagnosisConfig:
+    # -- acceptance (diagnose.evidence) ------------------------------------------------
+    #: Significance of the held-out likelihood-ratio test: a 5 % family-wise error,
+    #: Bonferroni-divided over the six effects tried.
+    alpha: float = 0.05 / 6
+    #: An effect must also remove this share of the held-out residual norm: below it an
+    #: effect is statistically real but too small to matter for a virtual machine.
+    min_relevant: float = 0.03
+    #: A described external load must remove this share of the residual norm …
+    min_gain: float = 0.04
+    #: … plus this much per parameter it adds (2 per time block).
+    per_param: float = 0.01
+    #: Nothing to explain when the held-out residual rms is below this many times the
+    #: measurement noise (SPEC §7 "none").
+    noise_factor: float = 3.0
+
+    # -- what each effect's name means (effects.py, bounds of the fits) ---------------
+    #: A backlash gap below this (mm) is below the 1 µm resolution CNC scales and encoders
+    #: measure with: not a gap the data can show.
+    min_gap_mm: float = 0.001
+    #: A breakaway force within this ratio of Coulomb friction is no Stribeck effect at the
+    #: scale eq. 3.2 resolves.
+    min_static_ratio: float = 1.2
+    #: A resonance is a lightly damped mode: ζ at most this (a better-damped pole pair is a
+    #: filter the base model's poles already stand for).  It bounds the fit, so the search
+    #: cannot buy training cost with a filter and call it a mode.
+    max_mode_damping: float = 0.15
+    #: Lowest frequency a mode is started at, Hz (below, the loop itself and the moves dominate).
+    min_mode_hz: float = 5.0
+    #: Residual spectrum peaks holding at least this share of the residual power start a mode.
+    peak_min_share: float = 0.15
+    #: A mode started at such a peak is fitted inside this band (× the peak frequency): a
+    #: two-mass mode shows between f·√μ and f in closed loop, so its free-free frequency
+    #: lies at or above the peak.
+    peak_band: tuple[float, float] = (0.9, 1.4)
+
+    # -- search (candidates.search) ----------------------------------------------------
+    #: Recordings longer than this (s) are scored on one hold-out fold instead of two and
+    #: get one second effect tried instead of two (time budget).
+    long_s: float = 10.0
+    #: Of all starts of an effect, at most this many (lowest free-run cost with the base
+    #: held; the best of every variant always) get the short profile fit.  Generous on
+    #: purpose: with the base held a large gap or a low mode costs more than a small one
+    #: even where it is the truth, so a tight screen would rank away the right start …
+    screened_starts: int = 16
+    #: … of this many iterations (the base re-adapts to the effect held at its start: the
+    #: base identified without the effect has absorbed part of it) …
+    profile_iter: int = 3
+    #: … and this many of them (lowest cost after it) the joint fit of base and effect.
+    joint_starts: int = 2
+    #: Iterations of the joint fit with the coarse difference step (then half as many
+    #: with the fine one).
+    joint_iter: int = 20
+    #: Forward-difference steps in scaled units (relative to the start).  Contact, stick and
+    #: clipping events land on sub-step boundaries, so the free-run cost ripples on the
+    #: 0.1 % scale: the coarse step reads the slope through the ripple, the fine one polishes.
+    fd_step: float = 1e-3
+    fd_step_rough: float = 1e-2
+    #: Base re-fit iterations of the reference models (re-fits from every candidate's base).
+    reference_iter: int = 15
+
+    # -- a weakly determined dead time (candidates.centre_delay) ------------------------
+    #: Delays whose training cost lies within this share of the best fit equally well (2 %
+    #: of the cost is 1 % of the residual norm, a third of ``min_relevant``) …
+    delay_profile_tol: float = 0.02
+    #: … searched for between these multiples of the fitted delay …
+    delay_scan_range: tuple[float, float] = (0.1, 3.0)
+    #: … with a first step of this share either way, then this many halvings …
+    delay_scan_step: float = 0.1
+    delay_bisections: int = 4
+    #: … each point a base re-fit of this many iterations.
+    delay_profile_iter: int = 8
+
+
+DEFAULT = DiagnosisConfig()

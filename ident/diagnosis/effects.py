@@ -1,0 +1,449 @@
+"""The effects of SPEC §7, one object each: parameters, bounds, starts, meaning, words.
+
+An :class:`Effect` knows everything the diagnosis needs of one piece of physics the base
+model of eq. 3.3 leaves out, so the algorithm in :mod:`ident.diagnosis.diagnose` and the
+search in :mod:`ident.diagnosis.candidates` never ask which effect they hold:
+
+- ``free(spec)``: the parameters the output-error fit moves (names of ``EP_INDEX``),
+  ``bounds``/``scale_floor``/``fd_step`` for each; ``added``: how many the acceptance rule
+  charges for;
+- ``starts(base, chunk, evidence)``: starting models, led by the residual's localisation
+  (spectrum peaks, position periodogram, |u| percentiles) and covering each structural
+  variant (where the loop reads position, where a delay sits, whether an integrator is
+  protected from windup …);
+- ``parameters(spec)`` / ``set_arrays(p, ep, modes)``: SPEC §7 words ↔ simulator arrays
+  (:mod:`ident.diagnosis.augmented`), also used by :class:`ident.axis_model.AxisModel`;
+- ``implausible(spec, Ts)``: why fitted values are not the physics the name means ("" if
+  they are) — part of the effect's definition, never a signature veto;
+- ``words(p)`` and ``signature(loc)``: what the user reads, what the localisation shows.
+"""
+
+from __future__ import annotations
+
+import math
+import numpy as np
+
+from ident.diagnosis.augmented import MODE_SLOTS, simulate_augmented
+from ident.diagnosis.config import DEFAULT, DiagnosisConfig
+from ident.diagnosis.spec import Chunk, ModelSpec, sse
+
+__all__ = ["Effect", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share"]
+
+
+def cascade_motor_share(theta: np.ndarray) -> float:
+    """ψ, the share of the position feedback that reads the motor, implied by θ of eq. 3.3.
+
+    A P-PI cascade (position gain Kp, velocity loop Kv + Ki/s on the motor) gives
+    ``u = Kv·Kp·(x_r − x_table) + Ki·Kp·∫(x_r − x_table) − Kv·ẋ − Ki·x_motor``: the position
+    term a2 = Kv·Kp + Ki reads the table with the command's gain b2 = Kv·Kp (θ[5]) and the
+    motor with the rest, ψ = 1 − b2/a2 (Table 3.3: 0.82).  A PID on the scale has b2 = a2, ψ = 0.
+    """
+    a2, b2 = float(theta[1]), float(theta[5])
+    return float(np.clip(1.0 - b2 / a2, 0.0, 1.0)) if a2 > 0.0 else 0.0
+
+
+def _vmax(chunk: Chunk) -> float:
+    return float(np.max(np.abs(chunk.derivs[0]))) or 1.0
+
+
+def _amax(chunk: Chunk) -> float:
+    return float(np.max(np.abs(chunk.derivs[1]))) or 1.0
+
+
+class Effect:
+    """One effect of SPEC §7 (subclasses below; instances in :data:`EFFECT_MODELS`)."""
+
+    name: str = ""
+    #: parameters the acceptance rule charges for
+    added: int = 1
+    #: scale floors of the fit's scaled coordinates z = p / max(|p0|, floor)
+    scale_floor: dict[str, float] = {}
+    #: per-parameter difference steps that hold whatever the base step
+    fd_step: dict[str, float] = {}
+
+    def free(self, spec: ModelSpec) -> list[str]:
+        raise NotImplementedError
+
+    def bounds(self, name: str, p0: float, chunk: Chunk, cfg: DiagnosisConfig) -> tuple[float, float]:
+        if name == "motor_fraction":
+            return 0.2, 0.98
+        raise KeyError(name)
+
+    def starts(self, base: ModelSpec, chunk: Chunk, evidence: dict, cfg: DiagnosisConfig) -> list[ModelSpec]:
+        raise NotImplementedError
+
+    def parameters(self, spec: ModelSpec) -> dict:
+        raise NotImplementedError
+
+    def set_arrays(self, p: dict, ep: np.ndarray, modes: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def implausible(self, spec: ModelSpec, Ts: float, cfg: DiagnosisConfig = DEFAULT) -> str:
+        return ""
+
+    def words(self, p: dict) -> str:
+        return self.name
+
+    def signature(self, loc: dict) -> dict:
+        return {}
+
+    def variant(self, spec: ModelSpec) -> int:
+        return int(spec.modes[MODE_SLOTS[self.name]]) if self.name in MODE_SLOTS else 0
+
+
+def _concentration(loc: dict, share: str, time_share: str) -> float:
+    t = loc.get(time_share, 0.0)
+    return float(loc.get(share, 0.0) / t) if t > 0 else 0.0
+
+
+class Backlash(Effect):
+    """A dead band between motor and table (mode 0: loop on the motor, table recorded;
+    mode 1: two masses across a stiff contact, the loop reading the table)."""
+
+    name = "backlash"
+    added = 2
+    scale_floor = {"gap_mm": 1e-3}
+    #: over the gap the cost is a parabola with ±20 % ripple at 0.1 % steps (contacts on
+    #: sub-step boundaries): with 0.1 % differences the gap never moves from its start
+    fd_step = {"gap_mm": 0.03}
+    #: starting gaps, mm: a log grid over what feed drives show (1 µm … 1 mm)
+    start_gaps_mm = (0.003, 0.01, 0.03, 0.1, 0.3)
+
+    def free(self, spec):
+        return ["gap_mm", "motor_fraction"] if self.variant(spec) == 1 else ["gap_mm"]
+
+    def bounds(self, name, p0, chunk, cfg):
+        return (0.0, 1.0) if name == "gap_mm" else super().bounds(name, p0, chunk, cfg)
+
+    def starts(self, base, chunk, evidence, cfg):
+        psi = cascade_motor_share(base.theta)
+        out = []
+        for g in self.start_gaps_mm:
+            out.append(base.with_effect(self.name, {"gap_mm": g}, 0))
+            s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": psi}, 1)
+            # with the motor leading the table by half the gap in steady motion, a position
+            # term reading the motor in part (share ψ) sees an offset a2·ψ·g/2 against the
+            # motion, which the base fitted without the gap took as Coulomb friction
+            shift = s.theta[1] * psi * 0.5 * g
+            s.theta[6] -= shift
+            s.theta[7] += shift
+            out.append(s)
+        return out
+
+    def parameters(self, spec):
+        ep = spec.ep
+        out = {"gap_mm": float(ep[0]), "loop": "table_fed_back" if spec.modes[0] else "table_recorded"}
+        if spec.modes[0]:
+            out["motor_fraction"] = float(ep[11])
+            out["position_motor_share"] = float(ep[12])
+        return out
+
+    def set_arrays(self, p, ep, modes):
+        ep[0] = p["gap_mm"]
+        if p.get("loop") == "table_fed_back":
+            modes[0] = 1
+            ep[11] = p.get("motor_fraction", 0.5)
+            ep[12] = p.get("position_motor_share", 0.0)
+
+    def implausible(self, spec, Ts, cfg=DEFAULT):
+        g = float(spec.ep[0])
+        return f"gap below {1e3 * cfg.min_gap_mm:.0f} µm" if g < cfg.min_gap_mm else ""
+
+    def words(self, p):
+        return f"backlash, gap {p['gap_mm']:.3g} mm"
+
+    def signature(self, loc):
+        return {"after_reversal_30ms_share": loc.get("after_reversal_30ms_share", 0.0),
+                "concentration": _concentration(loc, "after_reversal_30ms_share", "after_reversal_30ms_time_share")}
+
+
+class Stribeck(Effect):
+    """Breakaway friction r·d at rest falling to Coulomb d with speed (v_s)."""
+
+    name = "stribeck"
+    added = 2
+    scale_floor = {"stribeck_velocity_mm_s": 0.1}
+
+    def free(self, spec):
+        return ["static_to_coulomb_ratio", "stribeck_velocity_mm_s"]
+
+    def bounds(self, name, p0, chunk, cfg):
+        return (1.0, 20.0) if name == "static_to_coulomb_ratio" else (1e-4, _vmax(chunk))
+
+    def starts(self, base, chunk, evidence, cfg):
+        return [base.with_effect(self.name, {"static_to_coulomb_ratio": r, "stribeck_velocity_mm_s": v})
+                for r in (1.5, 3.0, 5.0) for v in (0.2, 1.0, 0.02 * _vmax(chunk))]
+
+    def parameters(self, spec):
+        return {"static_to_coulomb_ratio": float(spec.ep[1]), "stribeck_velocity_mm_s": float(spec.ep[2])}
+
+    def set_arrays(self, p, ep, modes):
+        ep[1], ep[2] = p["static_to_coulomb_ratio"], p["stribeck_velocity_mm_s"]
+
+    def implausible(self, spec, Ts, cfg=DEFAULT):
+        r = float(spec.ep[1])
+        return (f"breakaway within {100 * (cfg.min_static_ratio - 1):.0f} % of Coulomb friction"
+                if r < cfg.min_static_ratio else "")
+
+    def words(self, p):
+        return (f"Stribeck friction, static/Coulomb {p['static_to_coulomb_ratio']:.2g}, "
+                f"Stribeck velocity {p['stribeck_velocity_mm_s']:.2g} mm/s")
+
+    def signature(self, loc):
+        return {"low_speed_share": loc.get("low_speed_share", 0.0) + loc.get("at_rest_share", 0.0),
+                "concentration": _concentration(loc, "low_speed_share", "low_speed_time_share")}
+
+
+class Resonance(Effect):
+    """A lightly damped pole pair: a filter on the recorded position (mode 0) or the
+    free-free mode of a two-mass drive inside the loop, closed on the table (mode 1) or on
+    the motor with the table recorded (mode 2)."""
+
+    name = "resonance"
+    added = 3
+    scale_floor = {"gain": 0.1}
+
+    def free(self, spec):
+        extra = "motor_fraction" if self.variant(spec) >= 1 else "gain"
+        return ["freq_hz", "damping", extra]
+
+    def bounds(self, name, p0, chunk, cfg):
+        if name == "freq_hz":
+            return 0.5, 0.45 / chunk.Ts
+        if name == "damping":  # the definition of a resonance bounds the fit (config.max_mode_damping)
+            return 0.002, cfg.max_mode_damping
+        if name == "gain":
+            return -5.0, 5.0
+        return super().bounds(name, p0, chunk, cfg)
+
+    def starts(self, base, chunk, evidence, cfg):
+        Ts = chunk.Ts
+        peaks = [p["freq_hz"] for p in evidence.get("spectrum_peaks", [])[:2]
+                 if p["freq_hz"] > cfg.min_mode_hz
+                 and max(p.get("share_above_20_hz", 0.0), p.get("power_share", 0.0)) >= cfg.peak_min_share]
+        # then a log grid over the band machine-tool modes occupy (10 Hz up to 0.3/Ts)
+        fs = list(peaks)
+        for f in np.geomspace(10.0, 0.3 / Ts, 4):
+            if all(abs(math.log(f / c)) > 0.2 for c in fs):
+                fs.append(float(f))
+        psi = cascade_motor_share(base.theta)
+        out = []
+        for f in fs:
+            # a mode started at a residual spectrum peak stays near it (a two-mass mode shows
+            # in closed loop a little below its free-free frequency: cfg.peak_band × the peak)
+            box = {"freq_hz": (cfg.peak_band[0] * f, cfg.peak_band[1] * f)} if f in peaks else {}
+            zeta = 0.02 if f in peaks else 0.05
+            variants = [({"gain": 1.0}, 0)] + [({"motor_fraction": 0.8, "position_motor_share": p}, 1)
+                                               for p in dict.fromkeys((0.0, psi))]
+            variants.append(({"motor_fraction": 0.8, "position_motor_share": 0.0}, 2))
+            for extra, mode in variants:
+                s = base.with_effect(self.name, {"freq_hz": f, "damping": zeta, **extra}, mode)
+                s.box.update(box)
+                out.append(s)
+        return out
+
+    def parameters(self, spec):
+        ep = spec.ep
+        if spec.modes[3]:
+            return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "motor_fraction": float(ep[11]),
+                    "kind": "two_mass", "loop": "motor" if spec.modes[3] == 2 else "table",
+                    "position_motor_share": float(ep[12])}
+        return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "gain": float(ep[5]), "kind": "output_filter"}
+
+    def set_arrays(self, p, ep, modes):
+        ep[3], ep[4] = p["freq_hz"], p["damping"]
+        if p.get("kind") == "two_mass":
+            modes[3] = 2 if p.get("loop") == "motor" else 1
+            ep[11] = p.get("motor_fraction", 0.5)
+            ep[12] = p.get("position_motor_share", ep[12])
+        else:
+            ep[5] = p.get("gain", 1.0)
+
+    def implausible(self, spec, Ts, cfg=DEFAULT):
+        f, z = float(spec.ep[3]), float(spec.ep[4])
+        if z > cfg.max_mode_damping or f > 0.45 / Ts:
+            return f"not a lightly damped mode (ζ = {z:.2f}, {f:.0f} Hz)"
+        return ""
+
+    def words(self, p):
+        return f"resonance at {p['freq_hz']:.1f} Hz, damping {p['damping']:.3f}"
+
+    def signature(self, loc):
+        peaks = loc.get("spectrum_peaks", [])
+        top = peaks[0] if peaks else {"freq_hz": 0.0, "power_share": 0.0, "prominence": 0.0}
+        return {"peak_freq_hz": top["freq_hz"], "peak_power_share": top["power_share"],
+                "prominence": top["prominence"]}
+
+
+class TimeDelay(Effect):
+    """A dead time on the recorded position (mode 0) or inside the loop (mode 1)."""
+
+    name = "time_delay"
+    added = 1
+    scale_floor = {"delay_s": 1e-3}
+
+    def free(self, spec):
+        return ["delay_s"]
+
+    def bounds(self, name, p0, chunk, cfg):
+        return 0.0, 0.1
+
+    def starts(self, base, chunk, evidence, cfg):
+        from ident.diagnosis.candidates import chunk_regression, delayed_regression_start
+
+        Ts = chunk.Ts
+        out = [base.with_effect(self.name, {"delay_s": d * Ts}, mode) for d in (0.7, 1.5, 3.0, 6.0) for mode in (0, 1)]
+        if base.sampled:
+            # the valley of a dead time inside the loop can lie far from the base identified
+            # without it (gains 2-3x lower): start there from the regression that knows the
+            # delay (m samples in the regression ≈ m − 1 samples of dead time on the sampled
+            # controller: the hold and the sampled velocity add about one)
+            reg = chunk_regression(chunk)
+            for m in (1, 2, 3, 5) if reg is not None else ():
+                s0 = delayed_regression_start(chunk, m, reg)
+                if s0 is not None:
+                    s0.modes[:] = base.modes
+                    out.append(s0.with_effect(self.name, {"delay_s": max(m - 1, 0.5) * Ts}, 1))
+        return out
+
+    def parameters(self, spec):
+        out = {"delay_s": float(spec.ep[6]), "where": "actuation" if spec.modes[1] else "capture"}
+        if "delay_s" in spec.ranges:
+            out["delay_range_s"] = [float(v) for v in spec.ranges["delay_s"]]
+        return out
+
+    def set_arrays(self, p, ep, modes):
+        ep[6] = p["delay_s"]
+        modes[1] = 1 if p.get("where") == "actuation" else 0
+
+    def implausible(self, spec, Ts, cfg=DEFAULT):
+        # shorter than the lag a digital loop has anyway (the sample of hold and backward-
+        # difference velocity the continuous eq. 3.3 turns into a delay): the controller
+        if float(spec.ep[6]) < (0.5 * Ts if spec.sampled else Ts):
+            return "delay within the lag a digital loop has anyway"
+        return ""
+
+    def words(self, p):
+        words = f"time delay {1e3 * p['delay_s']:.2f} ms ({p['where']}"
+        lo, hi = p.get("delay_range_s", (p["delay_s"], p["delay_s"]))
+        if hi > 1.15 * lo:  # a weakly determined delay: say which ones fit as well
+            words += f"; {1e3 * lo:.2f}–{1e3 * hi:.2f} ms fit equally well"
+        return words + ")"
+
+    def signature(self, loc):
+        wh = loc.get("whiteness", {})
+        return {"cross_correlation_peak": wh.get("cross_correlation_peak", 0.0),
+                "lag_samples": wh.get("cross_correlation_peak_lag_samples", 0)}
+
+
+class CyclicError(Effect):
+    """A position-periodic error of the recorded position (mode 0, mm) or force (mode 1, mm/s²)."""
+
+    name = "cyclic_error"
+    added = 3
+    scale_floor = {"amplitude_sin": 1e-4, "amplitude_cos": 1e-4}
+
+    def free(self, spec):
+        return ["period_mm", "amplitude_sin", "amplitude_cos"]
+
+    def bounds(self, name, p0, chunk, cfg):
+        return (0.7 * p0, 1.4 * p0) if name == "period_mm" else (-np.inf, np.inf)
+
+    def starts(self, base, chunk, evidence, cfg):
+        per = evidence.get("position_periodic", {})
+        pg = evidence.get("position_periodogram_")
+        cands: list[float] = []
+        if pg is not None:  # the three strongest distinct periods of the position periodogram
+            periods, share = pg
+            for i in np.argsort(share)[::-1]:
+                if all(abs(np.log(periods[i] / c)) > 0.1 for c in cands):
+                    cands.append(float(periods[i]))
+                if len(cands) >= 3:
+                    break
+        if not cands:
+            cands = [per.get("period_mm") or 1.0]
+        amp = max(per.get("amplitude_mm", 0.0), 1e-4)
+        a2 = abs(base.theta[1]) or 1.0
+        out = []
+        for P in cands:
+            for mode, a in ((0, amp), (1, a2 * amp)):
+                # the phase is linear in the model: the best of four, base held, is start enough
+                group = [base.with_effect(self.name, {"period_mm": P, "amplitude_sin": a * np.cos(ph),
+                                                      "amplitude_cos": a * np.sin(ph)}, mode)
+                         for ph in (0.0, 0.5 * np.pi, np.pi, 1.5 * np.pi)]
+                out.append(min(group, key=lambda s: sse(s, chunk)))
+        return out
+
+    def parameters(self, spec):
+        ep = spec.ep
+        return {"period_mm": float(ep[7]), "amplitude": float(np.hypot(ep[8], ep[9])),
+                "amplitude_unit": "mm/s^2" if spec.modes[2] else "mm", "phase_rad": float(np.arctan2(ep[9], ep[8])),
+                "kind": "disturbance" if spec.modes[2] else "position_error"}
+
+    def set_arrays(self, p, ep, modes):
+        ep[7] = p["period_mm"]
+        phase = p.get("phase_rad", 0.0)
+        ep[8], ep[9] = p["amplitude"] * math.cos(phase), p["amplitude"] * math.sin(phase)
+        modes[2] = 1 if p.get("kind") == "disturbance" else 0
+
+    def words(self, p):
+        return f"cyclic error, period {p['period_mm']:.3g} mm, amplitude {p['amplitude']:.3g} {p['amplitude_unit']}"
+
+    def signature(self, loc):
+        per = loc.get("position_periodic", {})
+        return {"period_mm": per.get("period_mm", 0.0), "explained_share": per.get("explained_share", 0.0),
+                "median_share": per.get("median_share", 0.0)}
+
+
+class Saturation(Effect):
+    """The control output clipped to ±limit, with (mode 0) or without (mode 1) anti-windup."""
+
+    name = "saturation"
+    added = 1
+
+    def free(self, spec):
+        return ["limit"]
+
+    def bounds(self, name, p0, chunk, cfg):
+        return 1e-3 * _amax(chunk), 100.0 * _amax(chunk)
+
+    def starts(self, base, chunk, evidence, cfg):
+        u = np.empty(chunk.n)
+        simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, base.theta, flags=base.flags(), ep=base.ep,
+                           modes=base.modes, starts=chunk.starts, derivs=chunk.derivs, u_out=u)
+        au = np.abs(u[np.isfinite(u)])
+        # ψ: the share of the position term that is the integral of the motor velocity —
+        # 0 for a PID, about 0.8 for a P-PI cascade (it stops or runs on with the integral)
+        psis = dict.fromkeys((0.0, cascade_motor_share(base.theta)))
+        return [base.with_effect(self.name, {"limit": float(np.percentile(au, q)), "position_motor_share": psi}, w)
+                for q in (99.9, 99.0, 96.0) for psi in psis for w in (0, 1)]
+
+    def parameters(self, spec):
+        return {"limit": float(spec.ep[10]), "limit_unit": "mm/s^2", "position_motor_share": float(spec.ep[12]),
+                "anti_windup": not bool(spec.modes[5])}
+
+    def set_arrays(self, p, ep, modes):
+        ep[10] = p["limit"]
+        ep[12] = p.get("position_motor_share", ep[12])
+        modes[5] = 0 if p.get("anti_windup", True) else 1
+
+    def words(self, p):
+        return f"saturation, limit {p['limit']:.4g} mm/s²" + ("" if p.get("anti_windup", True) else
+                                                            ", integral winding up while clipped")
+
+    def signature(self, loc):
+        return {"high_acceleration_share": loc.get("high_acceleration_share", 0.0),
+                "concentration": _concentration(loc, "high_acceleration_share", "high_acceleration_time_share")}
+
+
+#: The effects of SPEC §7 by name, in the order of ``augmented.EFFECTS``.
+EFFECT_MODELS: dict[str, Effect] = {e.name: e for e in (Backlash(), Stribeck(), Resonance(), TimeDelay(),
+                                                         CyclicError(), Saturation())}
+
+
+def effect_parameters(spec: ModelSpec, effect: str) -> dict:
+    """The effect's parameters in the words of SPEC §7, with units in the key names."""
+    try:
+        return EFFECT_MODELS[effect].parameters(spec)
+    except KeyError:
+        raise ValueError(f"unknown effect {effect!r}") from None
