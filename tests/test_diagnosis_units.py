@@ -411,3 +411,24 @@ def test_a_backlash_gap_started_off_by_half_moves_to_the_true_gap(x_r, start_gap
     fitted = fit_spec(start, chunk)
     assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.06, rel=0.05)
     assert sse(fitted, chunk) < 0.01 * sse(start, chunk)
+
+
+def test_the_search_finds_a_gap_the_base_model_has_absorbed(x_r):
+    # the search starts from a base identified without the gap, which has taken part of
+    # it up (Coulomb offset, integral gain): base and gap must move back together
+    from ident.diagnosis.candidates import search
+    from ident.diagnosis.diagnose import fit_base
+
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["gap_mm"]] = 0.02
+    ep[EP_INDEX["motor_fraction"]] = 0.85
+    modes = np.array([1, 0, 0, 0, 1])  # two-mass drive across the gap, sampled controller
+    x = simulate_augmented(x_r, x_r, Ts, THETA_PID, flags=np.array([1, 0, 0, 0, 0, 0]), ep=ep, modes=modes)
+    x = x + np.random.default_rng(1).normal(0.0, 2e-4, x.size)
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    start = ModelSpec(THETA_PID.copy())
+    start.modes[4] = 1
+    base = fit_base(start, chunk)
+    fitted = search(base, "backlash", chunk, {})
+    assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.25)
+    assert sse(fitted, chunk) < 0.5 * sse(base, chunk)

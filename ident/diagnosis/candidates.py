@@ -7,15 +7,17 @@ bounds and scales (:mod:`ident.diagnosis.effects`):
    main nonlinear parameter (gap, breakaway ratio, frequency, delay, period, limit), led by
    the localisation where it can be (residual spectrum peaks, position periodogram, |u|
    percentiles, the regression that knows a delay), times every structural variant;
-2. **screen** — each start's free-run cost with the base held; the
-   ``config.screened_starts`` cheapest go on;
-3. **profile** — a short fit of the base parameters with the effect held at its start
-   (``config.profile_iter`` iterations): the base model identified without the effect has
-   adapted to it and must move back before the effect pays;
-4. **joint fit** — from the ``config.joint_starts`` best, bounded Levenberg–Marquardt on
-   base and effect parameters together, first with the coarse difference step (contact,
-   stick and clipping events make the cost ripple on a fine scale), then polished with the
-   fine one; the lowest training cost wins.
+2. **screen** — each start's free-run cost with the base held; the best of every
+   structural variant and the cheapest others up to ``config.screened_starts`` go on;
+3. **race** (successive halving) — every start still in the race gets a few iterations of
+   the joint fit of base and effect (bounded Levenberg–Marquardt with the coarse
+   difference step: contact, stick and clipping events make the cost ripple on a fine
+   scale); the better half by training cost (and the best of every variant) goes on to a
+   round twice as long, until ``config.joint_iter`` iterations have been spent on the
+   finalists.  Ranking starts after a short fit is unreliable — the base identified
+   without the effect has absorbed it, and the right start can cost the most until the
+   base has moved back — so no start is dropped on one early look;
+4. **polish** — the winner's joint fit continued with the fine difference step.
 
 A weakly determined dead time is then moved to the middle of the delays that fit equally
 well (:func:`centre_delay`).  Every fit works in scaled coordinates ``z = p / s`` (s = |start|
@@ -47,7 +49,7 @@ FD_STEP_ROUGH = DEFAULT.fd_step_rough
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
              max_iter: int = 25, bounds: dict[str, tuple[float, float]] | None = None,
-             fd_step: float = FD_STEP, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+             fd_step: float = FD_STEP, polish: bool = True, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
     """Output-error fit (eq. 3.6 on the free-run simulation) of base and effect parameters.
 
     Starts from ``spec``; base parameters move jointly with the effects' parameters
@@ -56,7 +58,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     ``spec.ranges`` (weakly determined, centred by :func:`centre_delay`) are held.  ``fd_step``: the
     forward-difference step (scaled units; an effect may fix its own for a parameter); a
     step coarser than ``cfg.fd_step`` is followed by a polish at the fine step (half the
-    iterations).  Returns the fitted copy; a fit that fails to improve returns ``spec``.
+    iterations) when ``polish``.  Returns the fitted copy; a fit that fails to improve returns ``spec``.
     """
     names, own = [], []
     if fit_effects:
@@ -125,7 +127,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
         fit = bounded_lm(resid, z0, lb, ub, max_iter=max_iter, step=steps(fd_step))
-        if fd_step > cfg.fd_step:  # polish: the coarse step stops short of the valley's floor
+        if polish and fd_step > cfg.fd_step:  # polish: the coarse step stops short of the valley's floor
             fit = bounded_lm(resid, fit.z, lb, ub, max_iter=max(max_iter // 2, 1), step=steps(cfg.fd_step))
     z, cost0 = fit.z, fit.cost
     if not np.isfinite(cost0):
@@ -138,8 +140,9 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
 
 def _variant(spec: ModelSpec) -> tuple:
-    """The structure a start stands for: its variants (``modes``), and whether evidence boxed it."""
-    return tuple(int(m) for m in spec.modes) + (bool(spec.box),)
+    """The valley a start stands for: its variants (``modes``), whether evidence boxed it,
+    and the evidence that gave it a base of its own."""
+    return tuple(int(m) for m in spec.modes) + (bool(spec.box), spec.origin)
 
 
 def _best_per_variant(specs: list[ModelSpec], costs: list[float], k: int) -> list[int]:
@@ -172,28 +175,32 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     ``evidence``: the localisation of :func:`ident.diagnosis.residuals.localise` (spectrum
     peaks, position periodogram) the effect's starts are led by; ``others``: further bases
     to start from (the other controller representation: an effect's valley may exist on
-    the sampled controller only, a gap rattling in a digital loop).  Screening and joint fit
-    keep the best start of every structural variant (:func:`_best_per_variant`).  Returns
-    the model with the lowest weighted training cost found; a dead time at the middle of
-    the delays that fit equally well (:func:`centre_delay`).
+    the sampled controller only, a gap rattling in a digital loop).  Screen and race keep
+    the best start of every structural variant (:func:`_best_per_variant`).  Returns the
+    model with the lowest weighted training cost found, after the effect's own
+    :meth:`~ident.diagnosis.effects.Effect.finish` (a dead time moved to the middle of the
+    delays that fit equally well, :func:`centre_delay`).
     """
     starts = [s for b in (base,) + tuple(others) for s in EFFECT_MODELS[effect].starts(b, chunk, evidence, cfg)]
     # 2. screen: free-run cost with the base held (diverging starts drop out)
     costs = [sse(s, chunk) for s in starts]
-    screened = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
-    if not screened:
+    alive = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
+    if not alive:
         return base.with_effect(effect)
-    # 3. profile: the base re-adapts to the effect held at its start
-    profiled = [fit_spec(s, chunk, fit_effects=False, max_iter=cfg.profile_iter, fd_step=cfg.fd_step_rough, cfg=cfg)
-                for s in screened]
-    costs = [sse(s, chunk) for s in profiled]
-    # 4. joint fit of base and effect, coarse step then fine polish
-    fits = [fit_spec(profiled[i], chunk, max_iter=cfg.joint_iter, fd_step=cfg.fd_step_rough, cfg=cfg)
-            for i in _best_per_variant(profiled, costs, cfg.joint_starts)]
-    best = min(fits, key=lambda f: sse(f, chunk))
-    if effect == "time_delay":
-        best = centre_delay(best, chunk, cfg)
-    return best
+    # 3. race: joint fits in rounds of doubling length, the worse half dropped after each
+    it, spent = cfg.race_first_iter, 0
+    while True:
+        alive = [fit_spec(s, chunk, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, cfg=cfg) for s in alive]
+        costs = [sse(s, chunk) for s in alive]
+        spent += it
+        if spent >= cfg.joint_iter or len(alive) == 1:
+            break
+        alive = [alive[i] for i in _best_per_variant(alive, costs, max(cfg.joint_starts, len(alive) // 2))]
+        it *= 2
+    # 4. polish the winner at the fine step
+    best = alive[int(np.argmin(costs))]
+    best = fit_spec(best, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step, cfg=cfg)
+    return EFFECT_MODELS[effect].finish(best, chunk, cfg)
 
 
 def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:

@@ -56,17 +56,17 @@ class DiagnosisConfig:
     #: get one second effect tried instead of two (time budget).
     long_s: float = 10.0
     #: Of all starts of an effect, at most this many (lowest free-run cost with the base
-    #: held; the best of every variant always) get the short profile fit.  Generous on
+    #: held; the best of every variant always) enter the race below.  Generous on
     #: purpose: with the base held a large gap or a low mode costs more than a small one
     #: even where it is the truth, so a tight screen would rank away the right start …
     screened_starts: int = 16
-    #: … of this many iterations (the base re-adapts to the effect held at its start: the
-    #: base identified without the effect has absorbed part of it) …
-    profile_iter: int = 3
-    #: … and this many of them (lowest cost after it) the joint fit of base and effect.
+    #: The race of the surviving starts (successive halving): a first round of this many
+    #: joint-fit iterations each, then rounds twice as long for the better half …
+    race_first_iter: int = 2
+    #: … down to at least this many starts (the best of every variant always stays) …
     joint_starts: int = 2
-    #: Iterations of the joint fit with the coarse difference step (then half as many
-    #: with the fine one).
+    #: … until the finalists have had this many iterations (then half as many with the
+    #: fine difference step for the winner).
     joint_iter: int = 20
     #: Forward-difference steps in scaled units (relative to the start).  Contact, stick and
     #: clipping events land on sub-step boundaries, so the free-run cost ripples on the

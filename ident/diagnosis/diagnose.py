@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
@@ -575,7 +575,7 @@ def diagnose(
         candidates: list[Candidate] = []
         singles: dict[str, _Scored] = {}
         current_sc, accepted = base_sc, []
-        best_name, best_gain = None, 0.0
+        best_name, best_gain, dropped = None, 0.0, None
         # every (effect, fold) fit is independent: spread them over the worker threads
         def fit_one(eff: str, i: int, tr: Chunk) -> ModelSpec:
             return search(base_sc.specs[i], eff, tr, loc, cfg, others=(other,))
@@ -640,6 +640,21 @@ def diagnose(
             if best2 is not None:
                 accepted.append(best2)
                 current_sc = best2_sc
+                # backward step of the stepwise selection: the first effect must still earn
+                # its parameters, by the same rule, next to the second alone (a small gap
+                # across a stiff contact can stand in for a mode it only mimics)
+                alone = singles[best2]
+                ev_back = evidence(current_sc, alone, EFFECT_MODELS[best_name].added, cfg)
+                if not (ev_back["significant"] and _gain(current_sc, alone)[0] >= cfg.min_relevant):
+                    dropped, accepted, current_sc = best_name, [best2], alone
+        # "accepted" means in the final model; an effect that passed alone but lost the
+        # stepwise selection says so in its score
+        first = accepted[0] if accepted else None
+        candidates = [replace(c, accepted=c.effect == first, score={**c.score, "passed_alone": c.accepted})
+                      if "added_to" not in c.score else
+                      replace(c, accepted=False, score={**c.score, "backward_step": f"{dropped} dropped: not "
+                              f"significant next to {c.effect} alone"}) if dropped and c.accepted else c
+                      for c in candidates]
     finally:
         pool.shutdown()
 

@@ -72,6 +72,10 @@ class Effect:
     def starts(self, base: ModelSpec, chunk: Chunk, evidence: dict, cfg: DiagnosisConfig) -> list[ModelSpec]:
         raise NotImplementedError
 
+    def finish(self, spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
+        """The fitted model as reported (an effect whose parameter the data leave open says so)."""
+        return spec
+
     def parameters(self, spec: ModelSpec) -> dict:
         raise NotImplementedError
 
@@ -303,8 +307,14 @@ class TimeDelay(Effect):
                 s0 = delayed_regression_start(chunk, m, reg)
                 if s0 is not None:
                     s0.modes[:] = base.modes
+                    s0.origin = "delayed regression"
                     out.append(s0.with_effect(self.name, {"delay_s": max(m - 1, 0.5) * Ts}, 1))
         return out
+
+    def finish(self, spec, chunk, cfg):
+        from ident.diagnosis.candidates import centre_delay
+
+        return centre_delay(spec, chunk, cfg)
 
     def parameters(self, spec):
         out = {"delay_s": float(spec.ep[6]), "where": "actuation" if spec.modes[1] else "capture"}

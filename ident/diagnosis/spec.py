@@ -96,13 +96,16 @@ class ModelSpec:
     #: narrower boxes for effect parameters a start was led to by evidence (a mode started
     #: at a residual spectrum peak stays near it): name → (low, high)
     box: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: what led a start away from the base, when not a grid ("" for the grid): a base from
+    #: other evidence (the regression that knows a delay) lies in a valley of its own
+    origin: str = ""
 
     def flags(self) -> np.ndarray:
         return np.array([1 if e in self.effects else 0 for e in EFFECTS], dtype=np.int64)
 
     def copy(self) -> "ModelSpec":
         return ModelSpec(self.theta.copy(), tuple(self.effects), self.ep.copy(), self.modes.copy(),
-                         dict(self.ranges), dict(self.box))
+                         dict(self.ranges), dict(self.box), self.origin)
 
     def with_effect(self, effect: str, params: dict | None = None, variant: int | None = None) -> "ModelSpec":
         """A copy with ``effect`` switched on, its parameters (names of ``EP_INDEX``) and variant set."""
