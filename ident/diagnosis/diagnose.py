@@ -650,11 +650,12 @@ def diagnose(
         # "accepted" means in the final model; an effect that passed alone but lost the
         # stepwise selection says so in its score
         first = accepted[0] if accepted else None
-        candidates = [replace(c, accepted=c.effect == first, score={**c.score, "passed_alone": c.accepted})
-                      if "added_to" not in c.score else
-                      replace(c, accepted=False, score={**c.score, "backward_step": f"{dropped} dropped: not "
-                              f"significant next to {c.effect} alone"}) if dropped and c.accepted else c
-                      for c in candidates]
+        for j, c in enumerate(candidates):
+            if "added_to" not in c.score:  # an effect alone on the base
+                candidates[j] = replace(c, accepted=c.effect == first, score={**c.score, "passed_alone": c.accepted})
+            elif dropped and c.accepted:  # the second effect, now standing alone
+                why = f"{dropped} dropped: not significant next to {c.effect} alone"
+                candidates[j] = replace(c, accepted=False, score={**c.score, "backward_step": why})
     finally:
         pool.shutdown()
 
