@@ -365,13 +365,26 @@ def test_a_resonance_is_a_lightly_damped_mode_below_nyquist_by_definition():
     res = EFFECT_MODELS["resonance"]
     spec = ModelSpec(THETA.copy(), ("resonance",))
     spec.modes[3] = 1
-    for f, zeta, ok in ((105.0, 0.02, True), (105.0, 0.4, False), (600.0, 0.02, False)):
+    chunk = make_chunk(np.linspace(0, 1, 300), np.linspace(0, 1, 300), Ts, segment_starts(300, None))
+    # ζ on the bound of the definition is a better-damped pole pair the fit asked for: no mode
+    for f, zeta, ok in ((105.0, 0.02, True), (105.0, 0.4, False), (600.0, 0.02, False),
+                        (105.0, DEFAULT.max_mode_damping, False)):
         spec.ep[EP_INDEX["freq_hz"]] = f
         spec.ep[EP_INDEX["damping"]] = zeta
-        assert (res.implausible(spec, Ts) == "") is ok
+        assert (res.implausible(spec, chunk) == "") is ok
     # and the fit cannot leave that definition: the damping's bound is the same figure
-    chunk = make_chunk(np.linspace(0, 1, 300), np.linspace(0, 1, 300), Ts, segment_starts(300, None))
     assert res.bounds("damping", 0.05, chunk, DEFAULT)[1] == DEFAULT.max_mode_damping
+
+
+def test_a_cyclic_error_shows_a_whole_period_within_the_travel_recorded():
+    from ident.diagnosis.effects import EFFECT_MODELS
+
+    x = np.linspace(0.0, 20.0, 300)  # 20 mm of travel
+    chunk = make_chunk(x, x, Ts, segment_starts(300, None))
+    spec = ModelSpec(THETA.copy(), ("cyclic_error",))
+    for period, ok in ((5.0, True), (15.0, True), (20.0, True), (25.0, False), (60.0, False)):
+        spec.ep[EP_INDEX["period_mm"]] = period
+        assert (EFFECT_MODELS["cyclic_error"].implausible(spec, chunk) == "") is ok
 
 
 def test_regression_with_the_delay_starts_near_the_true_gains(x_r):

@@ -9,15 +9,18 @@ bounds and scales (:mod:`ident.diagnosis.effects`):
    percentiles, the regression that knows a delay), times every structural variant;
 2. **screen** — each start's free-run cost with the base held; the best of every
    structural variant and the cheapest others up to ``config.screened_starts`` go on;
-3. **race** (successive halving) — every start still in the race gets a few iterations of
-   the joint fit of base and effect (bounded Levenberg–Marquardt with the coarse
-   difference step: contact, stick and clipping events make the cost ripple on a fine
-   scale); the better half by training cost (and the best of every variant) goes on to a
-   round twice as long, until ``config.joint_iter`` iterations have been spent on the
-   finalists.  Ranking starts after a short fit is unreliable — the base identified
-   without the effect has absorbed it, and the right start can cost the most until the
-   base has moved back — so no start is dropped on one early look;
-4. **polish** — the winner's joint fit continued with the fine difference step.
+3. **race** (successive halving over the share of the recording fitted) — every start
+   still in the race gets a few iterations of the joint fit of base and effect (bounded
+   Levenberg–Marquardt with the coarse difference step: contact, stick and clipping
+   events make the cost ripple on a fine scale) on the first quarter of every segment
+   (:meth:`Chunk.part <ident.diagnosis.spec.Chunk.part>`); the better half by training
+   cost (and the best of every variant) goes on to the first half of every segment, then
+   to the whole chunk.  Ranking starts after a short fit is unreliable — the base
+   identified without the effect has absorbed it, and the right start can cost the most
+   until the base has moved back — and early rounds on part of the recording are cheap,
+   so every start gets enough iterations for that before it is compared;
+4. **polish** — the winner's joint fit continued on the whole chunk, then with the fine
+   difference step.
 
 A weakly determined dead time is then moved to the middle of the delays that fit equally
 well (:func:`centre_delay`).  Every fit works in scaled coordinates ``z = p / s`` (s = |start|
@@ -187,19 +190,17 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     alive = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
     if not alive:
         return base.with_effect(effect)
-    # 3. race: joint fits in rounds of doubling length, the worse half dropped after each
-    it, spent = cfg.race_first_iter, 0
-    while True:
-        alive = [fit_spec(s, chunk, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, cfg=cfg) for s in alive]
-        costs = [sse(s, chunk) for s in alive]
-        spent += it
-        if spent >= cfg.joint_iter or len(alive) == 1:
+    # 3. race: joint fits on a growing share of the recording, the worse half dropped after each round
+    for r, (frac, it) in enumerate(zip(cfg.race_fidelity, cfg.race_iter)):
+        part = chunk.part(frac)
+        alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, cfg=cfg) for s in alive]
+        costs = [sse(s, part) for s in alive]
+        if r == len(cfg.race_fidelity) - 1 or len(alive) == 1:
             break
         alive = [alive[i] for i in _best_per_variant(alive, costs, max(cfg.joint_starts, len(alive) // 2))]
-        it *= 2
-    # 4. polish the winner at the fine step
+    # 4. polish the winner on the whole chunk at the fine step
     best = alive[int(np.argmin(costs))]
-    best = fit_spec(best, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step, cfg=cfg)
+    best = fit_spec(best, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, cfg=cfg)
     return EFFECT_MODELS[effect].finish(best, chunk, cfg)
 
 

@@ -42,6 +42,9 @@ class DiagnosisConfig:
     #: filter the base model's poles already stand for).  It bounds the fit, so the search
     #: cannot buy training cost with a filter and call it a mode.
     max_mode_damping: float = 0.15
+    #: A position-periodic error must show at least this many whole periods over the travel
+    #: recorded: less than one is a position map the data cannot tell from a slow drift.
+    min_periods: float = 1.0
     #: Lowest frequency a mode is started at, Hz (below, the loop itself and the moves dominate).
     min_mode_hz: float = 5.0
     #: Residual spectrum peaks holding at least this share of the residual power start a mode.
@@ -60,13 +63,20 @@ class DiagnosisConfig:
     #: purpose: with the base held a large gap or a low mode costs more than a small one
     #: even where it is the truth, so a tight screen would rank away the right start …
     screened_starts: int = 16
-    #: The race of the surviving starts (successive halving): a first round of this many
-    #: joint-fit iterations each, then rounds twice as long for the better half …
-    race_first_iter: int = 2
+    #: The race of the surviving starts (successive halving over the share of the
+    #: recording fitted, a multi-fidelity race): round i fits every start still in the race
+    #: jointly for ``race_iter[i]`` iterations on the first ``race_fidelity[i]`` of every
+    #: segment, then the better half by training cost goes on.  Early rounds on part of
+    #: the recording are cheap, so every start gets enough iterations for the base to move
+    #: back from the valley where it absorbed the effect before starts are compared (after
+    #: two iterations a large gap still costs more than a small one even where it is the
+    #: truth: LinuxCNC 20 µm gap); a quarter of each segment still holds dozens of moves.
+    race_fidelity: tuple[float, ...] = (0.25, 0.5, 1.0)
+    race_iter: tuple[int, ...] = (8, 8, 8)
     #: … down to at least this many starts (the best of every variant always stays) …
     joint_starts: int = 2
-    #: … until the finalists have had this many iterations (then half as many with the
-    #: fine difference step for the winner).
+    #: … then the winner is polished on the whole chunk: half this many iterations with the
+    #: coarse difference step, then a quarter with the fine one.
     joint_iter: int = 20
     #: Forward-difference steps in scaled units (relative to the start).  Contact, stick and
     #: clipping events land on sub-step boundaries, so the free-run cost ripples on the

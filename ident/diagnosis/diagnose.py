@@ -368,11 +368,11 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAU
             "significant": bool(lr > threshold and raw_ok)}
 
 
-def _plausible(eff: str, sc: "_Scored", Ts: float, cfg: DiagnosisConfig = DEFAULT) -> tuple[bool, str]:
+def _plausible(eff: str, sc: "_Scored", chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) -> tuple[bool, str]:
     """Is the fitted effect, in every fold, the physics its name means (:meth:`Effect.implausible
     <ident.diagnosis.effects.Effect.implausible>`: part of its definition, not a signature test)?"""
     for spec in sc.specs:
-        why = EFFECT_MODELS[eff].implausible(spec, Ts, cfg)
+        why = EFFECT_MODELS[eff].implausible(spec, chunk, cfg)
         if why:
             return False, why
     return True, ""
@@ -601,7 +601,7 @@ def diagnose(
             sc = singles[eff]
             gain, folds_ok, _gw = _gain(sc, base_sc)
             ev = evidence(sc, base_sc, EFFECT_MODELS[eff].added, cfg)
-            plaus, why = _plausible(eff, sc, Ts, cfg)
+            plaus, why = _plausible(eff, sc, full, cfg)
             if not above_noise:
                 plaus, why = False, f"held-out residual {1e3 * base_rms:.3f} µm is at the noise floor"
             ok = ev["significant"] and gain >= cfg.min_relevant and plaus
@@ -629,7 +629,7 @@ def diagnose(
             for eff, sc in pairs.items():
                 gain, folds_ok, _gw = _gain(sc, current_sc)
                 ev = evidence(sc, current_sc, EFFECT_MODELS[eff].added, cfg)
-                plaus, why = _plausible(eff, sc, Ts, cfg)
+                plaus, why = _plausible(eff, sc, full, cfg)
                 ok = ev["significant"] and gain >= cfg.min_relevant and plaus
                 round2.append((eff, sc, gain, folds_ok, ok, why, ev))
                 if ok and ev["likelihood_ratio"] > best2_gain:

@@ -13,7 +13,7 @@ search in :mod:`ident.diagnosis.candidates` never ask which effect they hold:
   protected from windup …);
 - ``parameters(spec)`` / ``set_arrays(p, ep, modes)``: SPEC §7 words ↔ simulator arrays
   (:mod:`ident.diagnosis.augmented`), also used by :class:`ident.axis_model.AxisModel`;
-- ``implausible(spec, Ts)``: why fitted values are not the physics the name means ("" if
+- ``implausible(spec, chunk)``: why fitted values are not the physics the name means ("" if
   they are) — part of the effect's definition, never a signature veto;
 - ``words(p)`` and ``signature(loc)``: what the user reads, what the localisation shows.
 """
@@ -82,7 +82,8 @@ class Effect:
     def set_arrays(self, p: dict, ep: np.ndarray, modes: np.ndarray) -> None:
         raise NotImplementedError
 
-    def implausible(self, spec: ModelSpec, Ts: float, cfg: DiagnosisConfig = DEFAULT) -> str:
+    def implausible(self, spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) -> str:
+        """Why the fitted ``spec`` is not the physics the name means on ``chunk`` ("" if it is)."""
         return ""
 
     def words(self, p: dict) -> str:
@@ -149,7 +150,7 @@ class Backlash(Effect):
             ep[11] = p.get("motor_fraction", 0.5)
             ep[12] = p.get("position_motor_share", 0.0)
 
-    def implausible(self, spec, Ts, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg=DEFAULT):
         g = float(spec.ep[0])
         return f"gap below {1e3 * cfg.min_gap_mm:.0f} µm" if g < cfg.min_gap_mm else ""
 
@@ -184,7 +185,7 @@ class Stribeck(Effect):
     def set_arrays(self, p, ep, modes):
         ep[1], ep[2] = p["static_to_coulomb_ratio"], p["stribeck_velocity_mm_s"]
 
-    def implausible(self, spec, Ts, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg=DEFAULT):
         r = float(spec.ep[1])
         return (f"breakaway within {100 * (cfg.min_static_ratio - 1):.0f} % of Coulomb friction"
                 if r < cfg.min_static_ratio else "")
@@ -263,9 +264,10 @@ class Resonance(Effect):
         else:
             ep[5] = p.get("gain", 1.0)
 
-    def implausible(self, spec, Ts, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg=DEFAULT):
         f, z = float(spec.ep[3]), float(spec.ep[4])
-        if z > cfg.max_mode_damping or f > 0.45 / Ts:
+        # ζ on its bound: the fit wanted a better-damped pole pair (a filter), not a mode
+        if z >= (1.0 - 1e-3) * cfg.max_mode_damping or f > 0.45 / chunk.Ts:
             return f"not a lightly damped mode (ζ = {z:.2f}, {f:.0f} Hz)"
         return ""
 
@@ -326,10 +328,10 @@ class TimeDelay(Effect):
         ep[6] = p["delay_s"]
         modes[1] = 1 if p.get("where") == "actuation" else 0
 
-    def implausible(self, spec, Ts, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg=DEFAULT):
         # shorter than the lag a digital loop has anyway (the sample of hold and backward-
         # difference velocity the continuous eq. 3.3 turns into a delay): the controller
-        if float(spec.ep[6]) < (0.5 * Ts if spec.sampled else Ts):
+        if float(spec.ep[6]) < (0.5 * chunk.Ts if spec.sampled else chunk.Ts):
             return "delay within the lag a digital loop has anyway"
         return ""
 
@@ -395,6 +397,13 @@ class CyclicError(Effect):
         phase = p.get("phase_rad", 0.0)
         ep[8], ep[9] = p["amplitude"] * math.cos(phase), p["amplitude"] * math.sin(phase)
         modes[2] = 1 if p.get("kind") == "disturbance" else 0
+
+    def implausible(self, spec, chunk, cfg=DEFAULT):
+        # an error is periodic only where a whole period is seen (cfg.min_periods over the travel)
+        period, travel = float(spec.ep[7]), float(np.ptp(chunk.x))
+        if period * cfg.min_periods > travel:
+            return f"period {period:.3g} mm longer than the {travel:.3g} mm travel recorded"
+        return ""
 
     def words(self, p):
         return f"cyclic error, period {p['period_mm']:.3g} mm, amplitude {p['amplitude']:.3g} {p['amplitude_unit']}"

@@ -59,6 +59,28 @@ class Chunk:
         """The same samples with only ``mask`` (and not the restart transients) scored."""
         return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, self.w, self.score & mask)
 
+    def part(self, frac: float) -> "Chunk":
+        """The first part of every segment holding ``frac`` of its scored samples (a cheaper
+        look at the same physics for the early rounds of a search).
+
+        Each part starts where its segment starts, so the simulation restarts where it
+        does on the whole chunk (from rest, not mid-move); weights and scored samples are
+        the chunk's own.  ``frac >= 1`` returns the chunk itself.
+        """
+        if frac >= 1.0:
+            return self
+        bounds = np.append(np.flatnonzero(self.starts), self.n)
+        keep = np.zeros(self.n, dtype=bool)
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            counted = np.cumsum(self.score[a:b])
+            if counted.size == 0 or counted[-1] == 0:
+                continue
+            end = a + int(np.searchsorted(counted, frac * counted[-1])) + 1
+            keep[a:end] = True
+        i = np.flatnonzero(keep)
+        return Chunk(self.x_r[i], self.x[i], self.Ts, self.starts[i], (self.derivs[0][i], self.derivs[1][i]),
+                     self.w[i], self.score[i])
+
 
 def make_chunk(x_r: np.ndarray, x: np.ndarray, Ts: float, starts: np.ndarray, skip_s: float = 0.02) -> Chunk:
     """A :class:`Chunk` from arrays (mm) and a start mask; derivatives taken inside segments."""
