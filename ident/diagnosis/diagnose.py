@@ -590,6 +590,16 @@ def diagnose(
         # candidate's base parameters (effect removed) and compare with the best base found,
         # so an effect is credited only with what the effect itself explains.
         base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, per_fold, scored, cfg)
+        # the lag every digital loop has (a sample of hold, a backward-difference velocity) is
+        # part of the base, not an effect: when a dead time within it earns its parameter by
+        # the acceptance rule, the base with that lag is the reference every effect must beat
+        # (a mode or a gap must not be credited with standing in for it)
+        lag = singles.get("time_delay")
+        if lag is not None and all(EFFECT_MODELS["time_delay"].implausible(sp, full, cfg) for sp in lag.specs):
+            if evidence(lag, base_sc, EFFECT_MODELS["time_delay"].added, cfg)["significant"] \
+                    and _gain(lag, base_sc)[0] >= cfg.min_relevant:
+                base_sc = lag
+                loc["reference"] = "base model with the lag of a digital loop"
         current_sc = base_sc
         # nothing to explain when the held-out residual is at the measurement noise (SPEC §7 "none")
         n_test = sum(r.size for r in base_sc.raw_r)
