@@ -41,7 +41,7 @@ from core.errors import InputError
 from ident.diagnosis.augmented import EFFECTS, segment_starts
 from ident.diagnosis.candidates import fit_spec, sampled_base, search, softened_base
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
-from ident.diagnosis.effects import EFFECT_MODELS, effect_parameters
+from ident.diagnosis.effects import EFFECT_MODELS, TimeDelay, effect_parameters
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
@@ -368,6 +368,13 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAU
             "significant": bool(lr > threshold and raw_ok)}
 
 
+def _earns(sc: "_Scored", ref: "_Scored", effect: str, cfg: DiagnosisConfig = DEFAULT) -> bool:
+    """Does ``effect`` in ``sc`` pass the acceptance rule against ``ref`` on held-out evidence
+    alone (:func:`evidence` significant and ``cfg.min_relevant`` of the residual removed)?"""
+    return (evidence(sc, ref, EFFECT_MODELS[effect].added, cfg)["significant"]
+            and _gain(sc, ref)[0] >= cfg.min_relevant)
+
+
 def _plausible(eff: str, sc: "_Scored", chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) -> tuple[bool, str]:
     """Is the fitted effect, in every fold, the physics its name means (:meth:`Effect.implausible
     <ident.diagnosis.effects.Effect.implausible>`: part of its definition, not a signature test)?"""
@@ -595,11 +602,10 @@ def diagnose(
         # the acceptance rule, the base with that lag is the reference every effect must beat
         # (a mode or a gap must not be credited with standing in for it)
         lag = singles.get("time_delay")
-        if lag is not None and all(EFFECT_MODELS["time_delay"].implausible(sp, full, cfg) for sp in lag.specs):
-            if evidence(lag, base_sc, EFFECT_MODELS["time_delay"].added, cfg)["significant"] \
-                    and _gain(lag, base_sc)[0] >= cfg.min_relevant:
-                base_sc = lag
-                loc["reference"] = "base model with the lag of a digital loop"
+        if (lag is not None and all(TimeDelay.within_inherent_lag(sp, full.Ts) for sp in lag.specs)
+                and _earns(lag, base_sc, "time_delay", cfg)):
+            base_sc = lag
+            loc["reference"] = "base model with the lag of a digital loop"
         current_sc = base_sc
         # nothing to explain when the held-out residual is at the measurement noise (SPEC §7 "none")
         n_test = sum(r.size for r in base_sc.raw_r)
@@ -654,8 +660,7 @@ def diagnose(
                 # its parameters, by the same rule, next to the second alone (a small gap
                 # across a stiff contact can stand in for a mode it only mimics)
                 alone = singles[best2]
-                ev_back = evidence(current_sc, alone, EFFECT_MODELS[best_name].added, cfg)
-                if not (ev_back["significant"] and _gain(current_sc, alone)[0] >= cfg.min_relevant):
+                if not _earns(current_sc, alone, best_name, cfg):
                     dropped, accepted, current_sc = best_name, [best2], alone
         # "accepted" means in the final model; an effect that passed alone but lost the
         # stepwise selection says so in its score

@@ -27,7 +27,7 @@ from ident.diagnosis.augmented import MODE_SLOTS, simulate_augmented
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.spec import Chunk, ModelSpec, sse
 
-__all__ = ["Effect", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share"]
+__all__ = ["Effect", "TimeDelay", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share"]
 
 
 def cascade_motor_share(theta: np.ndarray) -> float:
@@ -328,12 +328,15 @@ class TimeDelay(Effect):
         ep[6] = p["delay_s"]
         modes[1] = 1 if p.get("where") == "actuation" else 0
 
+    @staticmethod
+    def within_inherent_lag(spec: ModelSpec, Ts: float) -> bool:
+        """Is the dead time shorter than the lag a digital loop has anyway (the sample of
+        hold and backward-difference velocity the continuous eq. 3.3 turns into a delay;
+        half of it on the sampled base, which holds u itself)?"""
+        return float(spec.ep[6]) < (0.5 * Ts if spec.sampled else Ts)
+
     def implausible(self, spec, chunk, cfg=DEFAULT):
-        # shorter than the lag a digital loop has anyway (the sample of hold and backward-
-        # difference velocity the continuous eq. 3.3 turns into a delay): the controller
-        if float(spec.ep[6]) < (0.5 * chunk.Ts if spec.sampled else chunk.Ts):
-            return "delay within the lag a digital loop has anyway"
-        return ""
+        return "delay within the lag a digital loop has anyway" if self.within_inherent_lag(spec, chunk.Ts) else ""
 
     def words(self, p):
         words = f"time delay {1e3 * p['delay_s']:.2f} ms ({p['where']}"
