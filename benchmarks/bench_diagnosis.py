@@ -43,6 +43,7 @@ from make_concealed_recordings import Case, base_fit_pct, identify_base, make_ca
 
 from virtual_cnc.presets import load_machine  # noqa: E402
 from ident.diagnosis import EFFECTS, diagnose  # noqa: E402
+from benchmarks.diagnosis_config_arg import CONFIG_HELP, diagnosis_config  # noqa: E402
 
 CLASSES = list(EFFECTS) + ["none"]
 #: fadal-smc (full feed-forward) is left out: its clean base-model fit is only ~75 %, so the
@@ -139,13 +140,14 @@ def prepare_case(cls: str, i: int, seed0: int, cache: Path | None):
     return case, model, base_fit, t_prep
 
 
-def run_case(cls: str, i: int, seed0: int, use_cv: bool, cache: Path | None) -> dict:
+def run_case(cls: str, i: int, seed0: int, use_cv: bool, cache: Path | None, config: str = "{}") -> dict:
     """Prepare, diagnose and score one case; the row printed and tabulated."""
     case, model, base_fit, t_prep = prepare_case(cls, i, seed0, cache)
     machine, text = case.machine, case.effect_text
     t1 = time.perf_counter()
     val = None if use_cv else (case.val_x_r, case.val_x, case.val_segment)
-    d = diagnose(case.x_r, case.x, case.Ts, model, segment=case.segment, validation=val)
+    d = diagnose(case.x_r, case.x, case.Ts, model, segment=case.segment, validation=val,
+                 config=diagnosis_config(config))
     t2 = time.perf_counter()
     verdict = d.verdict if isinstance(d.verdict, list) else [d.verdict]
     est = {}
@@ -179,16 +181,16 @@ def run_case(cls: str, i: int, seed0: int, use_cv: bool, cache: Path | None) -> 
 
 
 def run(cases_per_class: int, use_cv: bool, seed0: int = 10_000, classes: list[str] | None = None,
-        jobs: int = 1, cache: Path | None = None) -> dict:
+        jobs: int = 1, cache: Path | None = None, config: str = "{}") -> dict:
     todo = [(cls, i) for cls in (classes or CLASSES) for i in range(cases_per_class)]
     rows = []
     if jobs <= 1:
         for cls, i in todo:
-            rows.append(run_case(cls, i, seed0, use_cv, cache))
+            rows.append(run_case(cls, i, seed0, use_cv, cache, config))
             print(rows[-1]["line"], flush=True)
     else:
         with ProcessPoolExecutor(max_workers=jobs) as pool:
-            futs = [pool.submit(run_case, cls, i, seed0, use_cv, cache) for cls, i in todo]
+            futs = [pool.submit(run_case, cls, i, seed0, use_cv, cache, config) for cls, i in todo]
             for f in futs:
                 rows.append(f.result())
                 print(rows[-1]["line"], flush=True)
@@ -250,6 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cv", action="store_true", help="score by cross-validation, not the validation recording")
     ap.add_argument("--no-long", action="store_true", help="skip the 25 s timing case")
     ap.add_argument("--seed", type=int, default=10_000)
+    ap.add_argument("--config", default="{}", help=CONFIG_HELP)
     ap.add_argument("--classes", default="", help="comma-separated classes to run (default: all seven)")
     ap.add_argument("--jobs", type=int, default=1, help="cases diagnosed in parallel (processes)")
     ap.add_argument("--cache", type=Path, default=None, help="folder keeping prepared cases between runs (keyed by seed, class and index only: empty it when the way cases are drawn or concealed changes)")
@@ -258,7 +261,7 @@ def main(argv: list[str] | None = None) -> int:
     for c in classes or []:
         if c not in CLASSES:
             ap.error(f"unknown class {c!r} (one of {', '.join(CLASSES)})")
-    res = run(args.cases_per_class, args.cv, args.seed, classes, args.jobs, args.cache)
+    res = run(args.cases_per_class, args.cv, args.seed, classes, args.jobs, args.cache, args.config)
     report(res["rows"])
     if not args.no_long:
         long_timing(args.cv)

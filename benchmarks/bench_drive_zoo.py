@@ -5,7 +5,7 @@ the figures that measure how it generalises come from benchmarks/bench_independe
 report seeds.  Per case: the verdict, the truth, the main parameter against the label,
 the base and augmented held-out fits, and the wall time of ``ident.identify``.
 
-    python benchmarks/bench_drive_zoo.py [--jobs 2] [--cases case_001,case_004]
+    python benchmarks/bench_drive_zoo.py [--jobs 2] [--cases case_001,case_004] [--config JSON]
 """
 
 from __future__ import annotations
@@ -19,14 +19,19 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 ZOO = ROOT.parent / "shared" / "data" / "drive-zoo-dev"
+sys.path.insert(0, str(ROOT))
+from benchmarks.diagnosis_config_arg import CONFIG_HELP  # noqa: E402
+
 MAIN_PARAM = {"backlash": "gap_mm", "resonance": "freq_hz", "time_delay": "delay_s", "cyclic_error": "period_mm"}
 
 
-def run_case(case: dict) -> dict:
+def run_case(case: dict, config: str = "{}") -> dict:
     import ident
+    from benchmarks.diagnosis_config_arg import diagnosis_config
 
     t0 = time.perf_counter()
-    res = ident.identify(ident.load(ZOO / case["recording"]), validate=ident.load(ZOO / case["validation"]))
+    res = ident.identify(ident.load(ZOO / case["recording"]), validate=ident.load(ZOO / case["validation"]),
+                         diagnosis_config=diagnosis_config(config))
     r = res.axes["X"]
     d = r.diagnosis
     verdict = d.verdict if isinstance(d.verdict, str) else "+".join(d.verdict)
@@ -45,6 +50,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--cases", default="")
+    ap.add_argument("--config", default="{}", help=CONFIG_HELP)
     args = ap.parse_args()
     if not ZOO.exists():
         sys.exit(f"{ZOO} not found")
@@ -53,7 +59,7 @@ def main() -> None:
         wanted = set(args.cases.split(","))
         cases = [c for c in cases if c["case"] in wanted]
     with ProcessPoolExecutor(args.jobs) as pool:
-        rows = list(pool.map(run_case, cases))
+        rows = list(pool.map(run_case, cases, [args.config] * len(cases)))
     hits = 0
     false_alarms = 0
     for r in rows:

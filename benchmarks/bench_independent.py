@@ -57,6 +57,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.independent_bench.cases import CLASSES, case_recordings, draw_case  # noqa: E402
+from benchmarks.diagnosis_config_arg import CONFIG_HELP  # noqa: E402
 
 #: fixed before any tuning of the ranges: tune on the first, report on the second
 TUNING_SEEDS = range(1000, 1070)
@@ -107,8 +108,9 @@ def calibrate(spec: dict, max_tries: int = MAX_TRIES):
     return None, None, None, fits, max_tries
 
 
-def run_case(spec: dict, cache: str | None = None) -> dict:
+def run_case(spec: dict, cache: str | None = None, config: str = "{}") -> dict:
     import ident
+    from benchmarks.diagnosis_config_arg import diagnosis_config
 
     t_cal = time.perf_counter()
     case, rec, val, fit0, tries = calibrate(spec)
@@ -130,7 +132,7 @@ def run_case(spec: dict, cache: str | None = None) -> dict:
         (d / f"{case.name}.json").write_text(json.dumps({k: out[k] for k in ("case", "truth", "closure", "kind",
                                                                                "truth_parameters")}, indent=1))
     t0 = time.perf_counter()
-    res = ident.identify(rec, validate=val)
+    res = ident.identify(rec, validate=val, diagnosis_config=diagnosis_config(config))
     out["wall_s"] = time.perf_counter() - t0
     r = res.axes["X"]
     d = r.diagnosis
@@ -246,6 +248,7 @@ def main() -> None:
     ap.add_argument("--classes", default="", help="comma-separated classes")
     ap.add_argument("--cache", default=None, help="directory to store the generated recordings (CSV)")
     ap.add_argument("--jsonl", default=None, help="append one JSON row per finished case to this file")
+    ap.add_argument("--config", default="{}", help=CONFIG_HELP)
     ap.add_argument("--summarize", default=None, help="only print the summary of a --jsonl file")
     args = ap.parse_args()
     if args.summarize:
@@ -267,7 +270,7 @@ def main() -> None:
     print(f"{'tuning' if args.tuning else 'report'} seeds, {len(specs)} cases, jobs {args.jobs}", flush=True)
     rows = []
     with ProcessPoolExecutor(args.jobs) as pool:
-        futures = [pool.submit(run_case, s, args.cache) for s in specs]
+        futures = [pool.submit(run_case, s, args.cache, args.config) for s in specs]
         for fut in as_completed(futures):
             r = fut.result()
             closed_loop_reference(r)

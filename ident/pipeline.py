@@ -13,7 +13,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from ident.refine import refine as refine_model
 from ident.regression import build_regression
 from ident.results import AxisResult, AxisTraces, ContourResult, IdentifyResult
 from ident.solvers import solve, solve_ls
+
+if TYPE_CHECKING:  # the diagnosis is imported when used: it is most of ident's import time
+    from ident.diagnosis.config import DiagnosisConfig
 
 __all__ = ["identify", "load_models"]
 
@@ -46,6 +49,8 @@ class IdentifyOptions:
     seed: int = 0  # of the genetic algorithm
     ga_population: int = 4000
     ga_generations: int = 500
+    #: tunables of the diagnosis (``ident.diagnosis.config.DiagnosisConfig``); None: its defaults
+    diagnosis_config: "DiagnosisConfig | None" = None
 
     def __post_init__(self) -> None:
         if self.solver not in SOLVERS:
@@ -172,7 +177,8 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
     if opts.diagnose:
         t0 = time.perf_counter()
         diagnosis = _diagnose(rec, axis, model, val, against,
-                              (lambda msg: progress(f"axis {axis}: {msg}")) if progress else None)
+                              (lambda msg: progress(f"axis {axis}: {msg}")) if progress else None,
+                              opts.diagnosis_config)
         timings["diagnosis"] = time.perf_counter() - t0
 
     return AxisResult(
@@ -187,7 +193,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
 
 
 def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | None, against: Recording | None,
-              progress=None):
+              progress=None, config=None):
     """Run the diagnosis on the command *as recorded*.
 
     The preview shift of the identification is deliberately not applied: a dead time is
@@ -208,7 +214,7 @@ def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | Non
                                    f"{rec.n_samples} samples as the recording (it has {against.n_samples})")
         sim_actual = against.axes[axis].actual
     return diagnose(tr.commanded, tr.actual, rec.sample_period, model, progress=progress,
-                    segment=rec.segment, validation=validation, against=sim_actual)
+                    segment=rec.segment, validation=validation, against=sim_actual, config=config)
 
 
 def _contour(results: dict[str, AxisResult], rec: Recording, val: Recording | None) -> ContourResult | None:
@@ -253,6 +259,7 @@ def identify(
     ga_population: int = 4000,
     ga_generations: int = 500,
     progress: Callable[[str], None] | None = None,
+    diagnosis_config: "DiagnosisConfig | None" = None,
 ) -> IdentifyResult:
     """Identify the drive model of every (or each chosen) axis of a recording.
 
@@ -271,6 +278,8 @@ def identify(
     refine : output-error refinement after the equation-error solve.
     seed, ga_population, ga_generations : of the genetic algorithm (``solver="ga"``).
     progress : called with a short description of each diagnosis stage (a progress line).
+    diagnosis_config : an :class:`ident.diagnosis.config.DiagnosisConfig` (its tunables, e.g.
+        for a benchmark's sweep); default its documented values.
 
     Returns
     -------
@@ -282,7 +291,8 @@ def identify(
     from threadpoolctl import threadpool_limits
 
     opts = IdentifyOptions(solver=solver, bounds=bounds, refine=refine, diagnose=diagnose, seed=seed,
-                           ga_population=ga_population, ga_generations=ga_generations)
+                           ga_population=ga_population, ga_generations=ga_generations,
+                           diagnosis_config=diagnosis_config)
     t_start = time.perf_counter()
     # The fits solve thousands of 3x3..9x9 systems: a multi-threaded BLAS would spend
     # more on hand-offs between threads than on the arithmetic.

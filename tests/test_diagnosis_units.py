@@ -13,6 +13,7 @@ from core.errors import InputError
 from ident.diagnosis import diagnose
 from ident.diagnosis.augmented import EP_INDEX, N_EP, segment_starts, simulate_augmented
 from ident.diagnosis.candidates import ModelSpec, fit_spec, make_chunk, sse
+from ident.diagnosis.config import DEFAULT
 from ident.diagnosis.residuals import localise, position_periodogram, reversal_times, whiteness, worst_windows
 
 Ts = 0.001
@@ -399,6 +400,46 @@ def test_regression_with_the_delay_starts_near_the_true_gains(x_r):
     # the regression without the delay puts the loop's gains far off (a2 > 2x)
     far = delayed_regression_start(chunk, 0)
     assert far.theta[1] > 2.0 * THETA[1]
+
+
+def test_regression_that_pairs_the_command_earlier_knows_a_capture_delay(x_r):
+    from ident.diagnosis.effects import TimeDelay
+
+    # continuous P-PI drive recorded 4 ms late: a grid start of the capture delay knows it
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["delay_s"]] = 0.004
+    x = simulate_augmented(x_r, x_r, Ts, THETA, flags=np.array([0, 0, 0, 1, 0, 0]), ep=ep, modes=np.array([0, 0, 0, 0, 0]))
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    near = TimeDelay._capture_start(chunk, 4)
+    assert near.theta[:2] == pytest.approx(THETA[:2], rel=0.2)
+    starts = TimeDelay().starts(ModelSpec(THETA.copy()), chunk, {}, DEFAULT)
+    capture = [s for s in starts if s.origin == "delayed regression" and s.modes[1] == 0]
+    assert {round(s.ep[EP_INDEX["delay_s"]] / Ts) for s in capture} >= {1, 3, 5}
+    # the start at the true delay simulates the recording far better than the base
+    # identified as if there were no delay, held at that delay
+    at_truth = TimeDelay._capture_start(chunk, 4).with_effect("time_delay", {"delay_s": 0.004}, 0)
+    unaware = TimeDelay._capture_start(chunk, 0).with_effect("time_delay", {"delay_s": 0.004}, 0)
+    assert sse(at_truth, chunk) < 0.5 * sse(unaware, chunk)
+
+
+def test_evidence_strength_charges_the_parameters_an_effect_adds():
+    from ident.diagnosis.diagnose import _Scored, evidence
+
+    rng = np.random.default_rng(0)
+    r0 = [rng.normal(size=4000)]
+    r1 = [0.9 * r0[0]]
+    ref, sc = _Scored([], r0, r0), _Scored([], r1, r1)
+    one, three = evidence(sc, ref, 1), evidence(sc, ref, 3)
+    assert one["likelihood_ratio"] == pytest.approx(three["likelihood_ratio"])
+    assert one["minus_log10_p"] > three["minus_log10_p"] > 0  # same gain, fewer parameters: stronger
+
+
+def test_a_released_spec_frees_what_a_range_held_and_leaves_the_original_alone():
+    spec = ModelSpec(THETA.copy(), ("time_delay",))
+    spec.ranges["delay_s"] = (0.001, 0.002)
+    free = spec.released()
+    assert free.ranges == {} and spec.ranges == {"delay_s": (0.001, 0.002)}
+    assert free.effects == spec.effects and np.array_equal(free.theta, spec.theta)
 
 
 # PID drive with velocity feed-forward (the fadal-pid preset's loop), eq. 3.3 parameters

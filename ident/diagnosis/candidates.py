@@ -264,17 +264,20 @@ def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) 
 
 
 
-def chunk_regression(chunk: Chunk) -> Regression | None:
-    """The regression of eq. 3.11 on ``chunk`` (no command shift, standstill rows kept), or None.
+def chunk_regression(chunk: Chunk, shift: int = 0) -> Regression | None:
+    """The regression of eq. 3.11 on ``chunk`` (standstill rows kept), or None.
 
-    None when it cannot be built (too few samples, no motion): no regression start then.
+    ``shift``: of the command, samples (:func:`ident.preprocessing.shift_command`; −m pairs
+    the recorded position with the command m samples earlier: the regression of a drive
+    whose position is captured m samples late).  None when it cannot be built (too few
+    samples, no motion): no regression start then.
     """
     from core.errors import RapidIdentError
     from ident.regression import build_regression
 
     seg = np.cumsum(chunk.starts) - 1
     try:
-        return build_regression(chunk.x_r, chunk.x, chunk.Ts, seg, shift=0, standstill="hold")
+        return build_regression(chunk.x_r, chunk.x, chunk.Ts, seg, shift=shift, standstill="hold")
     except RapidIdentError:
         return None
 

@@ -364,8 +364,11 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAU
     lr, n_eff = (lr_raw, ne_raw) if lr_raw >= lr_w else (lr_w, ne_w)
     threshold = float(chi2.ppf(1.0 - cfg.alpha / 2, max(k, 1)))
     raw_ok = sc.raw_sse < ref.raw_sse
+    # the strength of the evidence, comparable between effects adding different numbers of
+    # parameters: −log10 of the test's p-value (log form: a strong effect's p underflows)
+    strength = float(-chi2.logsf(lr, max(k, 1)) / math.log(10.0)) if math.isfinite(lr) else -math.inf
     return {"likelihood_ratio": float(lr), "threshold": threshold, "effective_samples": float(n_eff),
-            "significant": bool(lr > threshold and raw_ok)}
+            "minus_log10_p": strength, "significant": bool(lr > threshold and raw_ok)}
 
 
 def _earns(sc: "_Scored", ref: "_Scored", effect: str, cfg: DiagnosisConfig = DEFAULT) -> bool:
@@ -621,7 +624,7 @@ def diagnose(
             if not above_noise:
                 plaus, why = False, f"held-out residual {1e3 * base_rms:.3f} µm is at the noise floor"
             ok = ev["significant"] and gain >= cfg.min_relevant and plaus
-            rank = ev["likelihood_ratio"]
+            rank = ev["minus_log10_p"]
             if ok and rank > best_gain:
                 best_name, best_gain = eff, rank
             candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
@@ -631,13 +634,23 @@ def diagnose(
             accepted = [best_name]
             current_sc = singles[best_name]
             # a second effect must matter on its own too: only singles that passed are tried
-            others = [c.effect for c in sorted(candidates, key=lambda c: -c.score["likelihood_ratio"])
+            others = [c.effect for c in sorted(candidates, key=lambda c: -c.score["minus_log10_p"])
                       if c.accepted and c.effect != best_name][: 1 if long_rec else 2]
             best2, best2_gain, best2_sc = None, 0.0, None
             round2 = []
             say(f"trying a second effect on top of {best_name}")
-            jobs = {(eff, i): pool.submit(search, current_sc.specs[i], eff, tr, loc, cfg)
-                    for eff in others for i, (tr, _te) in enumerate(folds)}
+            first_sc = current_sc
+
+            def fit_pair(eff: str, i: int, tr: Chunk) -> ModelSpec:
+                # the pair is fitted jointly, searched from either single model (each effect's
+                # fit alone moved the base into its own valley, where the other's starts may
+                # not reach the pair's): the lower training cost wins.  A dead time held at
+                # the centre of the delays that fit equally well alone is free again.
+                a = search(first_sc.specs[i].released(), eff, tr, loc, cfg)
+                b = search(singles[eff].specs[i].released(), best_name, tr, loc, cfg)
+                return a if sse(a, tr) <= sse(b, tr) else b
+
+            jobs = {(eff, i): pool.submit(fit_pair, eff, i, tr) for eff in others for i, (tr, _te) in enumerate(folds)}
             pairs = {eff: scored([jobs[(eff, i)].result() for i in range(len(folds))]) for eff in others}
             if pairs:
                 current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, per_fold,
@@ -648,8 +661,8 @@ def diagnose(
                 plaus, why = _plausible(eff, sc, full, cfg)
                 ok = ev["significant"] and gain >= cfg.min_relevant and plaus
                 round2.append((eff, sc, gain, folds_ok, ok, why, ev))
-                if ok and ev["likelihood_ratio"] > best2_gain:
-                    best2, best2_gain, best2_sc = eff, ev["likelihood_ratio"], sc
+                if ok and ev["minus_log10_p"] > best2_gain:
+                    best2, best2_gain, best2_sc = eff, ev["minus_log10_p"], sc
             for eff, sc, gain, folds_ok, ok, why, ev in round2:
                 candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
                                              cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev))
@@ -662,9 +675,14 @@ def diagnose(
                 alone = singles[best2]
                 if not _earns(current_sc, alone, best_name, cfg):
                     dropped, accepted, current_sc = best_name, [best2], alone
+                elif (evidence(current_sc, alone, EFFECT_MODELS[best_name].added, cfg)["minus_log10_p"]
+                      < best2_gain):
+                    # both stay; the one whose removal would cost the more evidence is named first
+                    accepted = [best2, best_name]
         # "accepted" means in the final model; an effect that passed alone but lost the
         # stepwise selection says so in its score
-        first = accepted[0] if accepted else None
+        # (the effect the forward step chose first, whatever order the verdict names them in)
+        first = (accepted[0] if dropped or len(accepted) < 2 else best_name) if accepted else None
         for j, c in enumerate(candidates):
             if "added_to" not in c.score:  # an effect alone on the base
                 candidates[j] = replace(c, accepted=c.effect == first, score={**c.score, "passed_alone": c.accepted})

@@ -287,6 +287,9 @@ class TimeDelay(Effect):
     name = "time_delay"
     added = 1
     scale_floor = {"delay_s": 1e-3}
+    #: dead times (samples) the regression starts know: a log grid up to the 10 ms a
+    #: networked drive's capture or a slow servo cycle may add
+    regression_samples = (1, 2, 3, 5, 8, 12)
 
     def free(self, spec):
         return ["delay_s"]
@@ -299,19 +302,29 @@ class TimeDelay(Effect):
 
         Ts = chunk.Ts
         out = [base.with_effect(self.name, {"delay_s": d * Ts}, mode) for d in (0.7, 1.5, 3.0, 6.0) for mode in (0, 1)]
-        if base.sampled:
-            # the valley of a dead time inside the loop can lie far from the base identified
-            # without it (gains 2-3x lower): start there from the regression that knows the
-            # delay (m samples in the regression ≈ m − 1 samples of dead time on the sampled
-            # controller: the hold and the sampled velocity add about one)
-            reg = chunk_regression(chunk)
-            for m in (1, 2, 3, 5) if reg is not None else ():
-                s0 = delayed_regression_start(chunk, m, reg)
+        # the valley of a dead time can lie far from the base identified without it (gains
+        # 2-3x lower inside the loop; a capture delay the base took as a slower loop): start
+        # there too, from the regression of eq. 3.11 that knows the delay — m samples on the
+        # control-equivalent acceleration (inside the loop; on the sampled controller
+        # ≈ m − 1 samples of dead time, the hold and the sampled velocity add about one) or
+        # on the captured position (the command paired m samples earlier)
+        lag = 1 if base.sampled else 0
+        reg = chunk_regression(chunk)
+        for m in self.regression_samples:
+            for mode, s0 in ((1, delayed_regression_start(chunk, m, reg) if reg is not None else None),
+                             (0, self._capture_start(chunk, m))):
                 if s0 is not None:
                     s0.modes[:] = base.modes
                     s0.origin = "delayed regression"
-                    out.append(s0.with_effect(self.name, {"delay_s": max(m - 1, 0.5) * Ts}, 1))
+                    out.append(s0.with_effect(self.name, {"delay_s": max(m - lag * mode, 0.5) * Ts}, mode))
         return out
+
+    @staticmethod
+    def _capture_start(chunk: Chunk, m: int) -> ModelSpec | None:
+        from ident.diagnosis.candidates import chunk_regression, delayed_regression_start
+
+        reg = chunk_regression(chunk, shift=-m)
+        return delayed_regression_start(chunk, 0, reg) if reg is not None else None
 
     def finish(self, spec, chunk, cfg):
         from ident.diagnosis.candidates import centre_delay

@@ -129,6 +129,12 @@ class ModelSpec:
         return ModelSpec(self.theta.copy(), tuple(self.effects), self.ep.copy(), self.modes.copy(),
                          dict(self.ranges), dict(self.box), self.origin)
 
+    def released(self) -> "ModelSpec":
+        """A copy with no parameter held (``ranges`` cleared): for a joint fit with another effect."""
+        s = self.copy()
+        s.ranges = {}
+        return s
+
     def with_effect(self, effect: str, params: dict | None = None, variant: int | None = None) -> "ModelSpec":
         """A copy with ``effect`` switched on, its parameters (names of ``EP_INDEX``) and variant set."""
         s = self.copy()
