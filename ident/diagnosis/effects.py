@@ -343,10 +343,11 @@ class TimeDelay(Effect):
 
     @staticmethod
     def within_inherent_lag(spec: ModelSpec, Ts: float) -> bool:
-        """Is the dead time shorter than the lag a digital loop has anyway (the sample of
-        hold and backward-difference velocity the continuous eq. 3.3 turns into a delay;
-        half of it on the sampled base, which holds u itself)?"""
-        return float(spec.ep[6]) < (0.5 * Ts if spec.sampled else Ts)
+        """Is the dead time no longer than one sample period?  That much lag comes with
+        sampling itself — the hold and backward-difference velocity of a digital loop, where
+        in the servo cycle the position is read, recorded or the output applied — and a
+        recording sampled every Ts cannot tell it from a drive's dead time."""
+        return float(spec.ep[6]) <= Ts
 
     def implausible(self, spec, chunk, cfg=DEFAULT):
         return "delay within the lag a digital loop has anyway" if self.within_inherent_lag(spec, chunk.Ts) else ""
