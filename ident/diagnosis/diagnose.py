@@ -630,6 +630,7 @@ def diagnose(
             candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
                                          sigs, [], why, base_sc.raw_rms, ev))
         # 4. greedy forward selection: the best single effect, then a second on top of it
+        chosen_first = best_name  # by the forward step, whatever order the verdict names them in
         if best_name is not None:
             accepted = [best_name]
             current_sc = singles[best_name]
@@ -674,18 +675,16 @@ def diagnose(
                 # across a stiff contact can stand in for a mode it only mimics)
                 alone = singles[best2]
                 if not _earns(current_sc, alone, best_name, cfg):
-                    dropped, accepted, current_sc = best_name, [best2], alone
+                    dropped, accepted, current_sc, chosen_first = best_name, [best2], alone, best2
                 elif (evidence(current_sc, alone, EFFECT_MODELS[best_name].added, cfg)["minus_log10_p"]
                       < best2_gain):
                     # both stay; the one whose removal would cost the more evidence is named first
                     accepted = [best2, best_name]
         # "accepted" means in the final model; an effect that passed alone but lost the
         # stepwise selection says so in its score
-        # (the effect the forward step chose first, whatever order the verdict names them in)
-        first = (accepted[0] if dropped or len(accepted) < 2 else best_name) if accepted else None
         for j, c in enumerate(candidates):
             if "added_to" not in c.score:  # an effect alone on the base
-                candidates[j] = replace(c, accepted=c.effect == first, score={**c.score, "passed_alone": c.accepted})
+                candidates[j] = replace(c, accepted=c.effect == chosen_first, score={**c.score, "passed_alone": c.accepted})
             elif dropped and c.accepted:  # the second effect, now standing alone
                 why = f"{dropped} dropped: not significant next to {c.effect} alone"
                 candidates[j] = replace(c, accepted=False, score={**c.score, "backward_step": why})

@@ -350,7 +350,7 @@ class TimeDelay(Effect):
         return float(spec.ep[6]) <= Ts
 
     def implausible(self, spec, chunk, cfg=DEFAULT):
-        return "delay within the lag a digital loop has anyway" if self.within_inherent_lag(spec, chunk.Ts) else ""
+        return "delay within one sample period, the lag of sampling" if self.within_inherent_lag(spec, chunk.Ts) else ""
 
     def words(self, p):
         words = f"time delay {1e3 * p['delay_s']:.2f} ms ({p['where']}"
