@@ -99,6 +99,16 @@ def test_a_silence_longer_than_a_wrap_is_resolved_with_the_receive_times():
     assert u(k % 240 + 1, 0.001 * k + 0.0004) == k
 
 
+def test_a_pause_of_a_replay_faster_than_real_time_is_not_read_as_wraps():
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    for k in range(500):  # served 50x faster than the controller's clock
+        u(k % 240 + 1, 2e-5 * k)
+    # the sender pauses 0.15 s (a garbage collection) and goes on with the next tick: at
+    # the host period measured (20 µs) that would be 7500 ticks; the controller's own
+    # clock gives 150, under one wrap
+    assert u(500 % 240 + 1, 2e-5 * 499 + 0.15) == 500
+
+
 def test_ticks_missing_a_part_are_not_emitted_and_counted_lost():
     asm = TickAssembler(2, 2, CounterUnwrapper(240, 1, 0.001), 0.001)
     out = []

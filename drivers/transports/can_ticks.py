@@ -80,7 +80,10 @@ class CounterUnwrapper:
                 delta = self.modulus  # the same value again is at least one whole wrap later
             dt = ts - self._last_ts
             wraps = 0
-            if dt > self.wrap_min_s:
+            # a stream arriving faster than half the controller's clock is a replay: a pause
+            # there is its sender's (a garbage collection), not ticks lost on the bus, and
+            # at a host period of microseconds it would read as whole wraps that never were
+            if dt > self.wrap_min_s and self.host_period() >= 0.5 * self.period_s:
                 est = dt / self.host_period()
                 wraps = max(0, int(round((est - delta) / self.modulus)))
             u = self._last_u + delta + wraps * self.modulus
