@@ -44,25 +44,25 @@ if TYPE_CHECKING:
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
            "sampled_base", "softened_base", "effect_parameters", "cascade_motor_share", "chunk_regression",
-           "delayed_regression_start", "centre_delay", "FD_STEP", "FD_STEP_ROUGH"]
-
-FD_STEP = DEFAULT.fd_step
-FD_STEP_ROUGH = DEFAULT.fd_step_rough
+           "delayed_regression_start", "centre_delay"]
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
              max_iter: int = 25, bounds: dict[str, tuple[float, float]] | None = None,
-             fd_step: float = FD_STEP, polish: bool = True, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+             fd_step: float | None = None, polish: bool = True, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
     """Output-error fit (eq. 3.6 on the free-run simulation) of base and effect parameters.
 
     Starts from ``spec``; base parameters move jointly with the effects' parameters
     (:meth:`Effect.free <ident.diagnosis.effects.Effect.free>`, inside their bounds) when
     ``fit_base``; ``bounds`` narrows the box of named effect parameters; parameters named in
-    ``spec.ranges`` (weakly determined, centred by :func:`centre_delay`) are held.  ``fd_step``: the
-    forward-difference step (scaled units; an effect may fix its own for a parameter); a
-    step coarser than ``cfg.fd_step`` is followed by a polish at the fine step (half the
-    iterations) when ``polish``.  Returns the fitted copy; a fit that fails to improve returns ``spec``.
+    ``spec.ranges`` (weakly determined, centred by :func:`centre_delay`) are held.
+    ``fd_step``: the forward-difference step (scaled units; default ``cfg.fd_step``; an
+    effect may fix its own for a parameter); a step coarser than ``cfg.fd_step`` is followed
+    by a polish at the fine step (half the iterations) when ``polish``.  Returns the fitted
+    copy; a fit that fails to improve returns ``spec``.
     """
+    if fd_step is None:
+        fd_step = cfg.fd_step
     names, own = [], []
     if fit_effects:
         for e in spec.effects:

@@ -530,6 +530,9 @@ def diagnose(
     sigs = _signatures(loc)
     noise = noise_floor(x, v_r, Ts)
 
+    # long recordings: one hold-out fold, and only the best other effect is tried as a
+    # second one (time budget)
+    long_rec = x_r.size * Ts > cfg.long_s
     # held-out scheme: (training chunk, test chunk) per fold
     if validation is not None:
         try:
@@ -542,7 +545,7 @@ def diagnose(
     else:
         first, second = _fold_masks(starts)
         folds = [(full.scored(first), full.scored(second))]
-        if x_r.size * Ts <= cfg.long_s:
+        if not long_rec:
             folds.append((full.scored(second), full.scored(first)))
             scheme = "two-fold cross-validation over interleaved blocks"
         else:  # long recordings: one fold keeps the diagnosis within its time budget
@@ -556,8 +559,6 @@ def diagnose(
         loc_val = localise(r_val, te0.x_r, te0.x, *te0.derivs, Ts, te0.starts)
         loc_val["fit_pct"] = _fit_pct(te0.x_r - te0.x, r_val)
         disturbance["validation"] = _disturbance(base, te0)
-    # long recordings: only the best other effect is tried as a second one (time budget)
-    long_rec = x_r.size * Ts > cfg.long_s
     e_test = np.concatenate([te.x_r[te.score] - te.x[te.score] for _, te in folds])
     pool = ThreadPoolExecutor(max_workers=2)
 
@@ -600,8 +601,8 @@ def diagnose(
         # candidate's base parameters (effect removed) and compare with the best base found,
         # so an effect is credited only with what the effect itself explains.
         base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, per_fold, scored, cfg)
-        # the lag every digital loop has (a sample of hold, a backward-difference velocity) is
-        # part of the base, not an effect: when a dead time within it earns its parameter by
+        # the lag of sampling (at most a sample: TimeDelay.within_inherent_lag) is part of
+        # the base, not an effect: when a dead time within it earns its parameter by
         # the acceptance rule, the base with that lag is the reference every effect must beat
         # (a mode or a gap must not be credited with standing in for it)
         lag = singles.get("time_delay")
@@ -640,14 +641,13 @@ def diagnose(
             best2, best2_gain, best2_sc = None, 0.0, None
             round2 = []
             say(f"trying a second effect on top of {best_name}")
-            first_sc = current_sc
 
             def fit_pair(eff: str, i: int, tr: Chunk) -> ModelSpec:
                 # the pair is fitted jointly, searched from either single model (each effect's
                 # fit alone moved the base into its own valley, where the other's starts may
                 # not reach the pair's): the lower training cost wins.  A dead time held at
                 # the centre of the delays that fit equally well alone is free again.
-                a = search(first_sc.specs[i].released(), eff, tr, loc, cfg)
+                a = search(singles[best_name].specs[i].released(), eff, tr, loc, cfg)
                 b = search(singles[eff].specs[i].released(), best_name, tr, loc, cfg)
                 return a if sse(a, tr) <= sse(b, tr) else b
 

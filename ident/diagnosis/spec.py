@@ -21,7 +21,6 @@ from ident.diagnosis.augmented import (
     simulate_augmented,
     substeps,
 )
-from ident.diagnosis.config import DEFAULT
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "sim_substeps"]
 
@@ -49,11 +48,6 @@ class Chunk:
     @property
     def n(self) -> int:
         return int(self.x_r.size)
-
-    @property
-    def long(self) -> bool:
-        """Longer than :data:`DEFAULT.long_s`: the shorter searches (time budget)."""
-        return self.n * self.Ts > DEFAULT.long_s
 
     def scored(self, mask: np.ndarray) -> "Chunk":
         """The same samples with only ``mask`` (and not the restart transients) scored."""
