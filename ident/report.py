@@ -212,7 +212,7 @@ def _axis_section(r: AxisResult) -> str:
 
 def render_report(result: IdentifyResult) -> str:
     """The report as one HTML string."""
-    head = [f"<h1>rapid-ident: drive identification</h1>",
+    head = ["<h1>rapid-ident: drive identification</h1>",
             table([("recording", result.source), ("validation", result.validation_source or "none"),
                     ("controller", str(result.metadata.get("controller", "unknown"))),
                     ("transport", str(result.metadata.get("transport", "unknown"))),

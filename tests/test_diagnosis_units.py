@@ -434,6 +434,23 @@ def test_evidence_strength_charges_the_parameters_an_effect_adds():
     assert one["minus_log10_p"] > three["minus_log10_p"] > 0  # same gain, fewer parameters: stronger
 
 
+def test_an_effect_that_fits_the_training_data_worse_than_its_reference_earns_nothing():
+    from dataclasses import replace
+
+    from ident.diagnosis.config import DEFAULT
+    from ident.diagnosis.diagnose import _Scored, evidence
+
+    rng = np.random.default_rng(1)
+    r0 = [rng.normal(size=4000)]
+    r1 = [0.5 * r0[0]]  # held out: the residual halved, far beyond the χ² threshold
+    ref = _Scored([], r0, r0, [1.0])
+    better = evidence(_Scored([], r1, r1, [0.9]), ref, 1)
+    worse = evidence(_Scored([], r1, r1, [1.1]), ref, 1)  # another valley of the base
+    assert better["significant"] and better["fits_training"]
+    assert not worse["significant"] and not worse["fits_training"]
+    assert evidence(_Scored([], r1, r1, [1.1]), ref, 1, replace(DEFAULT, nested_training=False))["significant"]
+
+
 def test_a_released_spec_frees_what_a_range_held_and_leaves_the_original_alone():
     spec = ModelSpec(THETA.copy(), ("time_delay",))
     spec.ranges["delay_s"] = (0.001, 0.002)

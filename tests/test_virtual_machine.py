@@ -16,7 +16,7 @@ import gcode_gen
 import ident
 import virtual_cnc
 from agent import cli
-from core.errors import InputError, MachineError
+from core.errors import InputError
 from ident.contour import path_contour_error
 from ident.prediction import analyse, compare
 

@@ -190,11 +190,13 @@ def _fold_masks(starts: np.ndarray, blocks: int = 6) -> tuple[np.ndarray, np.nda
 
 @dataclass
 class _Scored:
-    """Fold-fitted specs with their weighted (test_r) and raw (raw_r, mm) held-out residuals."""
+    """Fold-fitted specs with their weighted (test_r) and raw (raw_r, mm) held-out residuals
+    and their weighted training costs (train_sse, one per fold)."""
 
     specs: list[ModelSpec]
     test_r: list[np.ndarray]
     raw_r: list[np.ndarray]
+    train_sse: list[float] = field(default_factory=list)
 
     @property
     def sse(self) -> float:
@@ -345,6 +347,11 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAU
     the weighted one (the low-speed set heard next to the high-speed set, as the fits
     weigh it), the larger counting — hence alpha/2 —, never credited when the residual in
     mm grows.
+
+    The effect's model contains the reference (the effect switched off), so it must also
+    fit the training data at least as well (``cfg.nested_training``): one that fits them
+    worse sits in another valley of the base parameters, and its held-out gain compares two
+    valleys, not the model with and without the effect.
     """
     from scipy.stats import chi2
 
@@ -364,11 +371,14 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAU
     lr, n_eff = (lr_raw, ne_raw) if lr_raw >= lr_w else (lr_w, ne_w)
     threshold = float(chi2.ppf(1.0 - cfg.alpha / 2, max(k, 1)))
     raw_ok = sc.raw_sse < ref.raw_sse
+    nested = (not cfg.nested_training or not sc.train_sse or not ref.train_sse
+              or all(a <= b for a, b in zip(sc.train_sse, ref.train_sse)))
     # the strength of the evidence, comparable between effects adding different numbers of
     # parameters: −log10 of the test's p-value (log form: a strong effect's p underflows)
     strength = float(-chi2.logsf(lr, max(k, 1)) / math.log(10.0)) if math.isfinite(lr) else -math.inf
     return {"likelihood_ratio": float(lr), "threshold": threshold, "effective_samples": float(n_eff),
-            "minus_log10_p": strength, "significant": bool(lr > threshold and raw_ok)}
+            "minus_log10_p": strength, "significant": bool(lr > threshold and raw_ok and nested),
+            "fits_training": bool(nested)}
 
 
 def _earns(sc: "_Scored", ref: "_Scored", effect: str, cfg: DiagnosisConfig = DEFAULT) -> bool:
@@ -572,7 +582,7 @@ def diagnose(
     def scored(specs: list[ModelSpec]) -> _Scored:
         rs = [residual(s, te) for s, (_, te) in zip(specs, folds)]
         raw = [simulate_spec(s, te)[te.score] - te.x[te.score] for s, (_, te) in zip(specs, folds)]
-        return _Scored(specs, rs, raw)
+        return _Scored(specs, rs, raw, [sse(s, tr) for s, (tr, _) in zip(specs, folds)])
 
     def fit_of(sc: _Scored) -> float:
         return _fit_pct(e_test, np.concatenate(sc.raw_r))

@@ -228,7 +228,7 @@ class Resonance(Effect):
                  and max(p.get("share_above_20_hz", 0.0), p.get("power_share", 0.0)) >= cfg.peak_min_share]
         # then a log grid over the band machine-tool modes occupy (10 Hz up to 0.3/Ts)
         fs = list(peaks)
-        for f in np.geomspace(10.0, 0.3 / Ts, 4):
+        for f in np.geomspace(10.0, 0.3 / Ts, cfg.mode_grid_points):
             if all(abs(math.log(f / c)) > 0.2 for c in fs):
                 fs.append(float(f))
         psi = cascade_motor_share(base.theta)
