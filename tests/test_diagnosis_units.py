@@ -428,7 +428,7 @@ def test_evidence_strength_charges_the_parameters_an_effect_adds():
     rng = np.random.default_rng(0)
     r0 = [rng.normal(size=4000)]
     r1 = [0.9 * r0[0]]
-    ref, sc = _Scored([], r0, r0), _Scored([], r1, r1)
+    ref, sc = _Scored([], r0, r0, [1.0]), _Scored([], r1, r1, [1.0])
     one, three = evidence(sc, ref, 1), evidence(sc, ref, 3)
     assert one["likelihood_ratio"] == pytest.approx(three["likelihood_ratio"])
     assert one["minus_log10_p"] > three["minus_log10_p"] > 0  # same gain, fewer parameters: stronger

@@ -196,7 +196,7 @@ class _Scored:
     specs: list[ModelSpec]
     test_r: list[np.ndarray]
     raw_r: list[np.ndarray]
-    train_sse: list[float] = field(default_factory=list)
+    train_sse: list[float]
 
     @property
     def sse(self) -> float:
@@ -244,7 +244,7 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold
 
     jobs = [(i, pool.submit(refit, i, sc.specs[i])) for sc in scs[1:] for i in range(len(folds))]
     best = list(ref.specs)
-    best_v = [sse(s, folds[i][0]) for i, s in enumerate(best)]
+    best_v = list(ref.train_sse)
     for i, job in jobs:
         s1 = job.result()
         v = sse(s1, folds[i][0])
@@ -255,7 +255,7 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold
     for i, s1 in enumerate(best):
         if s1 is not ref.specs[i] and not sse(s1, folds[i][1]) <= given[i]:
             best[i] = ref.specs[i]
-    return scored(best)
+    return ref if all(b is r for b, r in zip(best, ref.specs)) else scored(best)
 
 
 def fit_base(spec: ModelSpec, chunk: Chunk) -> ModelSpec:
@@ -371,8 +371,7 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAU
     lr, n_eff = (lr_raw, ne_raw) if lr_raw >= lr_w else (lr_w, ne_w)
     threshold = float(chi2.ppf(1.0 - cfg.alpha / 2, max(k, 1)))
     raw_ok = sc.raw_sse < ref.raw_sse
-    nested = (not cfg.nested_training or not sc.train_sse or not ref.train_sse
-              or all(a <= b for a, b in zip(sc.train_sse, ref.train_sse)))
+    nested = not cfg.nested_training or all(a <= b for a, b in zip(sc.train_sse, ref.train_sse))
     # the strength of the evidence, comparable between effects adding different numbers of
     # parameters: −log10 of the test's p-value (log form: a strong effect's p underflows)
     strength = float(-chi2.logsf(lr, max(k, 1)) / math.log(10.0)) if math.isfinite(lr) else -math.inf
