@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["LMResult", "bounded_lm"]
+__all__ = ["LMResult", "bounded_lm", "secant_lm"]
 
 #: Damping schedule: starting λ, its floor, the factor it grows by after a rejected trial
 #: step, the factor it shrinks by after an accepted one, and the trials per iteration.
@@ -105,10 +105,7 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
     J itself is a finite difference, accurate to a few digits at best.  ``einsum`` keeps
     the products single-threaded.
     """
-    z = np.clip(np.asarray(z0, dtype=float), lb, ub)
-    lb = np.broadcast_to(np.asarray(lb, dtype=float), z.shape)
-    ub = np.broadcast_to(np.asarray(ub, dtype=float), z.shape)
-    step = np.broadcast_to(np.asarray(step, dtype=float), z.shape)
+    z, lb, ub, step = _box(z0, lb, ub, step)
     n = z.size
     nfev = 1
     r = resid(z)
@@ -120,33 +117,18 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
     for it in range(max_iter):
         J = np.empty((r.size, n))
         for j in range(n):
-            h = h0[j] * max(1.0, abs(z[j])) if relative_step else h0[j]
-            if z[j] + h > ub[j]:
-                h = -h
-            zj = z.copy()
-            zj[j] += h
             nfev += 1
-            J[:, j] = (resid(zj) - r) / h
+            J[:, j] = _fd_column(resid, z, r, j, h0, ub, relative_step)
         A = np.einsum("ki,kj->ij", J, J)
         g = np.einsum("ki,k->i", J, r)
-        held = ((z <= lb) & (g > 0)) | ((z >= ub) & (g < 0))
-        free = np.flatnonzero(~held)
+        free = _free(z, g, lb, ub)
         if free.size == 0:
             return LMResult(z, cost, nfev, "every parameter is held at a bound")
-        Af, gf = A[np.ix_(free, free)], g[free]
-        d = np.maximum(np.diag(Af), 1e-12 * max(1.0, float(np.max(np.diag(Af)))))
         for _ in range(_TRIALS):
-            try:
-                delta = np.linalg.solve(Af + lam * np.diag(d), -gf)
-            except np.linalg.LinAlgError:
+            z_new = _trial(z, A, g, free, lam, lb, ub)
+            if z_new is None:
                 lam *= 10.0
                 continue
-            if not np.all(np.isfinite(delta)):
-                lam *= 10.0
-                continue
-            z_new = z.copy()
-            z_new[free] += delta
-            z_new = np.clip(z_new, lb, ub)
             nfev += 1
             r_new = resid(z_new)
             cost_new = 0.5 * float(r_new @ r_new)
@@ -174,3 +156,127 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
         if np.all(dz <= xtol * (xtol + np.abs(z))):
             return LMResult(z, cost, nfev, f"xtol: step below {xtol:g} after {it + 1} iterations")
     return LMResult(z, cost, nfev, f"max_iter: {max_iter} iterations")
+
+
+def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float = 1e-5,
+              ftol_iter: int = 2) -> LMResult:
+    """:func:`bounded_lm` with a secant Jacobian: one or two residual evaluations per iteration.
+
+    The secant version of Marquardt's method (Madsen, Nielsen & Tingleff, *Methods for
+    non-linear least squares problems*, 2004, §3.4): the Jacobian is taken by forward
+    differences once, then every trial point — accepted or not — updates it by Broyden's
+    rank-one formula ``J += (r(z+δ) − r(z) − Jδ) δᵀ / δᵀδ``, and one column per
+    iteration, in turn, is refreshed by a forward difference where the steps have not
+    explored that direction (|δ_j| < 0.8‖δ‖), so that J does not drift from the slope.
+    A trial is one iteration: λ grows ×6 after a rejected trial and shrinks ÷5 after an
+    accepted one, as in :func:`bounded_lm`.  When ``_TRIALS`` trials in a row fail, the
+    Jacobian is taken afresh by differences.
+
+    For a residual that costs a simulation and has ``n`` parameters, an iteration costs
+    1–2 evaluations instead of ``n + 1``: a fixed budget of evaluations (``max_nfev``,
+    the differences included) goes several times further from a poor start, at the price
+    of less accurate steps near the minimum (polish with :func:`bounded_lm`).  Bounds,
+    ``step``, ``ftol`` and ``ftol_iter`` as in :func:`bounded_lm` (the step absolute, in
+    the units of z).
+    """
+    z, lb, ub, step = _box(z0, lb, ub, step)
+    n = z.size
+    r = resid(z)
+    nfev = 1
+    cost = 0.5 * float(r @ r)
+
+    def jacobian() -> np.ndarray:
+        nonlocal nfev
+        J = np.empty((r.size, n))
+        for j in range(n):
+            J[:, j] = _fd_column(resid, z, r, j, step, ub, False)
+        nfev += n
+        return J
+
+    J = jacobian()
+    lam = _LAM0
+    small = fails = 0
+    col = 0
+    while nfev < max_nfev:
+        A = np.einsum("ki,kj->ij", J, J)
+        g = np.einsum("ki,k->i", J, r)
+        free = _free(z, g, lb, ub)
+        if free.size == 0:
+            return LMResult(z, cost, nfev, "every parameter is held at a bound")
+        z_new = _trial(z, A, g, free, lam, lb, ub) if np.all(np.isfinite(A)) else None
+        if z_new is None:  # no usable step from this J: differences again, or give up
+            if fails >= _TRIALS or nfev + n > max_nfev:
+                break
+            J = jacobian()
+            lam, fails = lam * 10.0, fails + 1
+            continue
+        r_new = resid(z_new)
+        nfev += 1
+        cost_new = 0.5 * float(r_new @ r_new)
+        delta = z_new - z
+        dd = float(delta @ delta)
+        if np.all(np.isfinite(r_new)) and dd > 0.0:
+            J += np.outer(r_new - r - J @ delta, delta / dd)
+        if np.isfinite(cost_new) and cost_new < cost:
+            rel = (cost - cost_new) / cost if cost > 0 else 0.0
+            z, r, cost = z_new, r_new, cost_new
+            lam = max(lam / _LAM_DOWN, _LAM_MIN)
+            fails = 0
+            small = small + 1 if rel < ftol else 0
+            if small >= ftol_iter:
+                return LMResult(z, cost, nfev, f"ftol: relative cost decrease {rel:.1e} < {ftol:g}")
+        else:
+            lam *= _LAM_UP
+            fails += 1
+            if fails >= _TRIALS:  # the secant has lost the slope: differences again
+                if nfev + n > max_nfev:
+                    break
+                J = jacobian()
+                lam, fails = _LAM0, 0
+                continue
+        # keep J honest: refresh, in turn, a column the steps have not explored
+        j = col % n
+        col += 1
+        if abs(delta[j]) < 0.8 * np.sqrt(dd) and nfev < max_nfev:
+            J[:, j] = _fd_column(resid, z, r, j, step, ub, False)
+            nfev += 1
+    return LMResult(z, cost, nfev, f"max_nfev: {nfev} evaluations")
+
+
+def _box(z0, lb, ub, step):
+    z = np.clip(np.asarray(z0, dtype=float), lb, ub)
+    lb = np.broadcast_to(np.asarray(lb, dtype=float), z.shape)
+    ub = np.broadcast_to(np.asarray(ub, dtype=float), z.shape)
+    step = np.broadcast_to(np.asarray(step, dtype=float), z.shape)
+    return z, lb, ub, step
+
+
+def _fd_column(resid, z, r, j, h0, ub, relative_step) -> np.ndarray:
+    """Forward difference of the residual along parameter j (towards the inside at an upper bound)."""
+    h = h0[j] * max(1.0, abs(z[j])) if relative_step else h0[j]
+    if z[j] + h > ub[j]:
+        h = -h
+    zj = z.copy()
+    zj[j] += h
+    return (resid(zj) - r) / h
+
+
+def _free(z, g, lb, ub) -> np.ndarray:
+    """Parameters not held: one on a bound whose gradient points out of the box is held."""
+    held = ((z <= lb) & (g > 0)) | ((z >= ub) & (g < 0))
+    return np.flatnonzero(~held)
+
+
+def _trial(z, A, g, free, lam, lb, ub):
+    """The damped Gauss–Newton trial point ``(JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr`` in the box, or None."""
+    Af, gf = A[np.ix_(free, free)], g[free]
+    d = np.maximum(np.diag(Af), 1e-12 * max(1.0, float(np.max(np.diag(Af)))))
+    try:
+        delta = np.linalg.solve(Af + lam * np.diag(d), -gf)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(delta)):
+        return None
+    z_new = z.copy()
+    z_new[free] += delta
+    return np.clip(z_new, lb, ub)

@@ -1,4 +1,5 @@
-"""The bounded Levenberg–Marquardt (ident.least_squares.bounded_lm) on problems with known solutions."""
+"""The bounded Levenberg–Marquardt (ident.least_squares.bounded_lm) and its secant version
+(secant_lm) on problems with known solutions."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ident.least_squares import bounded_lm
+from ident.least_squares import bounded_lm, secant_lm
 
 
 class Counted:
@@ -153,6 +154,57 @@ def test_an_exception_in_the_residual_propagates():
 
     with pytest.raises(Stop):
         bounded_lm(resid, [0.0, 0.0], [-5.0, -5.0], [5.0, 5.0])
+
+
+def _decays():
+    """r = Σ a_i exp(−b_i t) − y over four decays (8 parameters), a start and a box."""
+    t = np.linspace(0.0, 1.0, 400)
+    a, b = np.array([2.0, 0.5, 1.0, 0.3]), np.array([3.0, 20.0, 8.0, 50.0])
+    y = (a[:, None] * np.exp(-b[:, None] * t)).sum(0)
+
+    def f(z):
+        z = np.asarray(z, dtype=float)
+        return (z[0::2, None] * np.exp(-z[1::2, None] * t)).sum(0) - y
+
+    return f, np.array([1.0, 1.0, 1.0, 10.0, 1.0, 5.0, 1.0, 30.0]), np.zeros(8), np.full(8, 100.0)
+
+
+def test_secant_lm_gets_as_far_in_fewer_evaluations_than_differences_each_iteration():
+    # 8 parameters: an iteration of bounded_lm costs 9 evaluations and more, one of
+    # secant_lm 1-2; both are run until the cost is 10^-4 of the start's
+    f, z0, lb, ub = _decays()
+    target = 1e-4 * 0.5 * float(np.sum(f(z0) ** 2))
+
+    def evaluations_to_target(counted: Counted) -> int:
+        costs = [0.5 * float(np.sum(counted.f(p) ** 2)) for p in counted.points]
+        return next(i + 1 for i, c in enumerate(costs) if c < target)
+
+    sec, fd = Counted(f), Counted(f)
+    res = secant_lm(sec, z0, lb, ub, max_nfev=300, step=1e-6, ftol=1e-14)
+    bounded_lm(fd, z0, lb, ub, max_iter=300, step=1e-6, ftol=1e-14, xtol=0.0)
+    assert res.nfev == len(sec.points) <= 300
+    assert evaluations_to_target(sec) < 0.8 * evaluations_to_target(fd)
+
+
+def test_secant_lm_keeps_to_its_budget_and_its_box():
+    f, z0, lb, ub = _decays()
+    ub = ub.copy()
+    ub[0] = 1.5  # the first amplitude (2 at the solution) is cut off by the box
+    sec = Counted(f)
+    res = secant_lm(sec, z0, lb, ub, max_nfev=25, step=1e-6)
+    assert res.nfev == len(sec.points) <= 25
+    assert np.all(np.array(sec.points) <= ub) and np.all(np.array(sec.points) >= lb)
+    assert 0.5 * float(np.sum(f(res.z) ** 2)) == pytest.approx(res.cost)
+    assert res.cost < 0.5 * float(np.sum(f(z0) ** 2))
+
+
+def test_secant_lm_stops_when_no_step_can_be_computed():
+    # a residual that is nan everywhere but the start: every trial is rejected, the
+    # Jacobian (nan) gives no step, and the search ends inside its budget at the start
+    resid = Counted(lambda z: np.array([0.0, 1.0]) if np.all(z == 0.0) else np.array([np.nan, np.nan]))
+    res = secant_lm(resid, [0.0, 0.0], [-1.0, -1.0], [1.0, 1.0], max_nfev=50)
+    np.testing.assert_array_equal(res.z, [0.0, 0.0])
+    assert res.nfev == len(resid.points) <= 50
 
 
 def test_the_module_imports_numpy_only():

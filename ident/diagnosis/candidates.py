@@ -37,7 +37,7 @@ from ident.diagnosis.augmented import EP_INDEX, simulate_augmented
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, cascade_motor_share, effect_parameters
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, sim_substeps, simulate_spec, sse
-from ident.least_squares import bounded_lm
+from ident.least_squares import bounded_lm, secant_lm
 
 if TYPE_CHECKING:
     from ident.regression import Regression
@@ -49,7 +49,8 @@ __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
              max_iter: int = 25, bounds: dict[str, tuple[float, float]] | None = None,
-             fd_step: float | None = None, polish: bool = True, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+             fd_step: float | None = None, polish: bool = True, secant_nfev: int = 0,
+             cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
     """Output-error fit (eq. 3.6 on the free-run simulation) of base and effect parameters.
 
     Starts from ``spec``; base parameters move jointly with the effects' parameters
@@ -58,8 +59,10 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     ``spec.ranges`` (weakly determined, centred by :func:`centre_delay`) are held.
     ``fd_step``: the forward-difference step (scaled units; default ``cfg.fd_step``; an
     effect may fix its own for a parameter); a step coarser than ``cfg.fd_step`` is followed
-    by a polish at the fine step (half the iterations) when ``polish``.  Returns the fitted
-    copy; a fit that fails to improve returns ``spec``.
+    by a polish at the fine step (half the iterations) when ``polish``.  ``secant_nfev`` > 0:
+    the secant Levenberg–Marquardt (:func:`ident.least_squares.secant_lm`) with that many
+    simulations instead, no polish.  Returns the fitted copy; a fit that fails to improve
+    returns ``spec``.
     """
     if fd_step is None:
         fd_step = cfg.fd_step
@@ -129,8 +132,12 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         return r
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
-        fit = bounded_lm(resid, z0, lb, ub, max_iter=max_iter, step=steps(fd_step))
-        if polish and fd_step > cfg.fd_step:  # polish: the coarse step stops short of the valley's floor
+        if secant_nfev > 0:
+            fit = secant_lm(resid, z0, lb, ub, max_nfev=secant_nfev, step=steps(fd_step))
+        else:
+            fit = bounded_lm(resid, z0, lb, ub, max_iter=max_iter, step=steps(fd_step))
+        # polish: the coarse step stops short of the valley's floor
+        if polish and fd_step > cfg.fd_step and secant_nfev <= 0:
             fit = bounded_lm(resid, fit.z, lb, ub, max_iter=max(max_iter // 2, 1), step=steps(cfg.fd_step))
     z, cost0 = fit.z, fit.cost
     if not np.isfinite(cost0):
@@ -193,7 +200,9 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     # 3. race: joint fits on a growing share of the recording, the worse half dropped after each round
     for r, (frac, it) in enumerate(zip(cfg.race_fidelity, cfg.race_iter)):
         part = chunk.part(frac)
-        alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, cfg=cfg) for s in alive]
+        nfev = cfg.race_evals[r] if cfg.race_evals else 0
+        alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, secant_nfev=nfev, cfg=cfg)
+                 for s in alive]
         costs = [sse(s, part) for s in alive]
         if r == len(cfg.race_fidelity) - 1 or len(alive) == 1:
             break
@@ -232,7 +241,8 @@ def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) 
             near = min(fits, key=lambda q: abs(q - r))  # warm start from the nearest profile point
             s0 = fits[near][1].copy()
             s0.ep[k] = r * d_hat
-            s1 = fit_spec(s0, chunk, fit_effects=False, max_iter=iters) if np.isfinite(sse(s0, chunk)) else s0
+            s1 = (fit_spec(s0, chunk, fit_effects=False, max_iter=iters, secant_nfev=cfg.delay_profile_evals)
+                  if np.isfinite(sse(s0, chunk)) else s0)
             fits[r] = (sse(s1, chunk), s1)
         return fits[r][0] <= (1.0 + tol) * min(v for v, _ in fits.values())
 

@@ -84,6 +84,14 @@ class DiagnosisConfig:
     #: truth: LinuxCNC 20 µm gap); a quarter of each segment still holds dozens of moves.
     race_fidelity: tuple[float, ...] = (0.25, 0.5, 1.0)
     race_iter: tuple[int, ...] = (8, 8, 8)
+    #: When given, the race's fits in round i are secant Levenberg–Marquardt
+    #: (:func:`ident.least_squares.secant_lm`) with ``race_evals[i]`` simulations per start
+    #: (0: differences as above, n + 1 simulations an iteration).  Off: on the tuning
+    #: seeds (36, 36, 36) cut the diagnosis median from 24.8 to 15.4 s but named 42/69
+    #: against 44/69 — resonance 2/10 against 6/10 (a mode's valley is narrow in frequency
+    #: and a secant Jacobian steps over it), saturation 7/9 against 4/9 — and (36, 36, 0)
+    #: lost the same modes (first 59 cases: 35 against 39 for both).
+    race_evals: tuple[int, ...] = ()
     #: … down to at least this many starts (the best of every variant always stays) …
     joint_starts: int = 2
     #: … then the winner is polished on the whole chunk: half this many iterations with the
@@ -108,6 +116,9 @@ class DiagnosisConfig:
     delay_bisections: int = 4
     #: … each point a base re-fit of this many iterations.
     delay_profile_iter: int = 8
+    #: … or, when > 0, a secant re-fit with this many simulations (see ``race_evals``;
+    #: measured only together with it).
+    delay_profile_evals: int = 0
 
 
 DEFAULT = DiagnosisConfig()

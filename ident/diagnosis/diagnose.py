@@ -258,19 +258,24 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold
     return ref if all(b is r for b, r in zip(best, ref.specs)) else scored(best)
 
 
-def fit_base(spec: ModelSpec, chunk: Chunk) -> ModelSpec:
+def fit_base(spec: ModelSpec, chunk: Chunk, pool: ThreadPoolExecutor | None = None) -> ModelSpec:
     """The base model of eq. 3.3 re-fitted in free run on ``chunk``, from two starts.
 
     From the given parameters and from :func:`softened_base` (the two faster poles moved
     to 150/s·(1 ms/Ts)): the identified model often sits in a poorer valley of the free-run
     cost (e.g. an integrator nearly cancelled by a zero).  Each start is fitted twice (the
     restart re-scales the parameters after the first long move); the lower cost wins.
+    The starts are fitted in ``pool``'s threads when given.
     """
     starts = [spec]
     soft = softened_base(spec, chunk.Ts, force=True)
     if soft is not None:
         starts.append(soft)
-    fits = [fit_spec(fit_spec(s, chunk, max_iter=30), chunk, max_iter=30) for s in starts]
+
+    def fit(s: ModelSpec) -> ModelSpec:
+        return fit_spec(fit_spec(s, chunk, max_iter=30), chunk, max_iter=30)
+
+    fits = list(pool.map(fit, starts)) if pool is not None else [fit(s) for s in starts]
     return min(fits, key=lambda f: sse(f, chunk))
 
 
@@ -511,10 +516,24 @@ def diagnose(
     full = make_chunk(x_r, x, Ts, starts)
 
     say = progress or (lambda _msg: None)
+    # the fits of the search are independent of each other: two worker threads (the
+    # simulation kernel releases the GIL) run them side by side
+    pool = ThreadPoolExecutor(max_workers=2)
+    try:
+        return _diagnose(x_r, x, Ts, theta, segment, starts, full, validation, against, effects, cfg, say,
+                         pool, t0)
+    finally:
+        pool.shutdown()
+
+
+def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segment, starts: np.ndarray,
+              full: Chunk, validation, against, effects: tuple[str, ...], cfg: DiagnosisConfig,
+              say: Callable[[str], None], pool: ThreadPoolExecutor, t0: float) -> Diagnosis:
+    """Steps 1–6 of :func:`diagnose` on checked input, every independent fit a job of ``pool``."""
     say("re-fitting the base model in free run")
     # 1. compare: the base model re-fitted in free run on all identification data
     # (twice: the restart re-scales the parameters after a long first move)
-    base = fit_base(ModelSpec(theta), full)
+    base = fit_base(ModelSpec(theta), full, pool)
     # the base model is eq. 3.3 with a continuous control law or the same law sampled and
     # held (a digital drive): whichever fits the identification recording better in free
     # run, once, for every candidate on top of it
@@ -569,7 +588,6 @@ def diagnose(
         loc_val["fit_pct"] = _fit_pct(te0.x_r - te0.x, r_val)
         disturbance["validation"] = _disturbance(base, te0)
     e_test = np.concatenate([te.x_r[te.score] - te.x[te.score] for _, te in folds])
-    pool = ThreadPoolExecutor(max_workers=2)
 
     def per_fold(fn, *lists):
         """Run fn(fold_index, train, test, *items) for every fold, in parallel threads."""
@@ -586,119 +604,121 @@ def diagnose(
     def fit_of(sc: _Scored) -> float:
         return _fit_pct(e_test, np.concatenate(sc.raw_r))
 
-    try:
-        if validation is not None:  # the training data are all the data: base is fitted already
-            base_sc = scored([base])
-        else:
-            base_sc = scored(per_fold(lambda i, tr, te: fit_spec(fit_spec(base, tr, max_iter=30), tr, max_iter=30)))
-        # 3. each effect alone, on top of the base model
-        candidates: list[Candidate] = []
-        singles: dict[str, _Scored] = {}
-        current_sc, accepted = base_sc, []
-        best_name, best_gain, dropped = None, 0.0, None
-        # every (effect, fold) fit is independent: spread them over the worker threads
-        def fit_one(eff: str, i: int, tr: Chunk) -> ModelSpec:
-            return search(base_sc.specs[i], eff, tr, loc, cfg, others=(other,))
+    if validation is not None:  # the training data are all the data: base is fitted already
+        base_sc = scored([base])
+    else:
+        base_sc = scored(per_fold(lambda i, tr, te: fit_spec(fit_spec(base, tr, max_iter=30), tr, max_iter=30)))
+    # 3. each effect alone, on top of the base model
+    candidates: list[Candidate] = []
+    singles: dict[str, _Scored] = {}
+    current_sc, accepted = base_sc, []
+    best_name, best_gain, dropped = None, 0.0, None
+    # every (effect, fold) fit is independent: spread them over the worker threads
+    def fit_one(eff: str, i: int, tr: Chunk) -> ModelSpec:
+        return search(base_sc.specs[i], eff, tr, loc, cfg, others=(other,))
 
-        jobs = {(eff, i): pool.submit(fit_one, eff, i, tr) for eff in effects for i, (tr, _te) in enumerate(folds)}
-        say(f"fitting {len(effects)} effects")
-        for k, eff in enumerate(effects):
-            singles[eff] = scored([jobs[(eff, i)].result() for i in range(len(folds))])
-            say(f"fitted {eff} ({k + 1}/{len(effects)})")
-        # the free-run cost of eq. 3.3 has several valleys: an augmented fit may simply have
-        # carried the base parameters into a better one.  Re-fit the base model from every
-        # candidate's base parameters (effect removed) and compare with the best base found,
-        # so an effect is credited only with what the effect itself explains.
-        base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, per_fold, scored, cfg)
-        # the lag of sampling (at most a sample: TimeDelay.within_inherent_lag) is part of
-        # the base, not an effect: when a dead time within it earns its parameter by
-        # the acceptance rule, the base with that lag is the reference every effect must beat
-        # (a mode or a gap must not be credited with standing in for it)
-        lag = singles.get("time_delay")
-        if (lag is not None and all(TimeDelay.within_inherent_lag(sp, full.Ts) for sp in lag.specs)
-                and _earns(lag, base_sc, "time_delay", cfg)):
-            base_sc = lag
-            loc["reference"] = "base model with the lag of a digital loop"
-        current_sc = base_sc
-        # nothing to explain when the held-out residual is at the measurement noise (SPEC §7 "none")
-        n_test = sum(r.size for r in base_sc.raw_r)
-        base_rms = math.sqrt(base_sc.raw_sse / max(n_test, 1))
-        above_noise = base_rms > cfg.noise_factor * noise
-        loc["noise_floor_mm"] = noise
-        loc["held_out_rms_mm"] = base_rms
-        for eff in effects:
-            sc = singles[eff]
-            gain, folds_ok, _gw = _gain(sc, base_sc)
-            ev = evidence(sc, base_sc, EFFECT_MODELS[eff].added, cfg)
+    # the longest searches first (two-mass variants), so both threads end together
+    heavy_first = sorted(effects, key=lambda e: not EFFECT_MODELS[e].two_mass)
+    jobs = {(eff, i): pool.submit(fit_one, eff, i, tr) for eff in heavy_first for i, (tr, _te) in enumerate(folds)}
+    say(f"fitting {len(effects)} effects")
+    for k, eff in enumerate(effects):
+        singles[eff] = scored([jobs[(eff, i)].result() for i in range(len(folds))])
+        say(f"fitted {eff} ({k + 1}/{len(effects)})")
+    # the free-run cost of eq. 3.3 has several valleys: an augmented fit may simply have
+    # carried the base parameters into a better one.  Re-fit the base model from every
+    # candidate's base parameters (effect removed) and compare with the best base found,
+    # so an effect is credited only with what the effect itself explains.
+    base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, per_fold, scored, cfg)
+    # the lag of sampling (at most a sample: TimeDelay.within_inherent_lag) is part of
+    # the base, not an effect: when a dead time within it earns its parameter by
+    # the acceptance rule, the base with that lag is the reference every effect must beat
+    # (a mode or a gap must not be credited with standing in for it)
+    lag = singles.get("time_delay")
+    if (lag is not None and all(TimeDelay.within_inherent_lag(sp, full.Ts) for sp in lag.specs)
+            and _earns(lag, base_sc, "time_delay", cfg)):
+        base_sc = lag
+        loc["reference"] = "base model with the lag of a digital loop"
+    current_sc = base_sc
+    # nothing to explain when the held-out residual is at the measurement noise (SPEC §7 "none")
+    n_test = sum(r.size for r in base_sc.raw_r)
+    base_rms = math.sqrt(base_sc.raw_sse / max(n_test, 1))
+    above_noise = base_rms > cfg.noise_factor * noise
+    loc["noise_floor_mm"] = noise
+    loc["held_out_rms_mm"] = base_rms
+    for eff in effects:
+        sc = singles[eff]
+        gain, folds_ok, _gw = _gain(sc, base_sc)
+        ev = evidence(sc, base_sc, EFFECT_MODELS[eff].added, cfg)
+        plaus, why = _plausible(eff, sc, full, cfg)
+        if not above_noise:
+            plaus, why = False, f"held-out residual {1e3 * base_rms:.3f} µm is at the noise floor"
+        ok = ev["significant"] and gain >= cfg.min_relevant and plaus
+        rank = ev["minus_log10_p"]
+        if ok and rank > best_gain:
+            best_name, best_gain = eff, rank
+        candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
+                                     sigs, [], why, base_sc.raw_rms, ev))
+    # 4. greedy forward selection: the best single effect, then a second on top of it
+    chosen_first = best_name  # by the forward step, whatever order the verdict names them in
+    if best_name is not None:
+        accepted = [best_name]
+        current_sc = singles[best_name]
+        # a second effect must matter on its own too: only singles that passed are tried
+        others = [c.effect for c in sorted(candidates, key=lambda c: -c.score["minus_log10_p"])
+                  if c.accepted and c.effect != best_name][: 1 if long_rec else 2]
+        best2, best2_gain, best2_sc = None, 0.0, None
+        round2 = []
+        say(f"trying a second effect on top of {best_name}")
+
+        # the pair is fitted jointly, searched from either single model (each effect's fit
+        # alone moved the base into its own valley, where the other's starts may not reach
+        # the pair's): the lower training cost wins.  A dead time held at the centre of the
+        # delays that fit equally well alone is free again.  Both searches are jobs of their own.
+        jobs = {(eff, i): (pool.submit(search, singles[best_name].specs[i].released(), eff, tr, loc, cfg),
+                           pool.submit(search, singles[eff].specs[i].released(), best_name, tr, loc, cfg))
+                for eff in others for i, (tr, _te) in enumerate(folds)}
+
+        def fit_pair(eff: str, i: int) -> ModelSpec:
+            a, b = (j.result() for j in jobs[(eff, i)])
+            tr = folds[i][0]
+            return a if sse(a, tr) <= sse(b, tr) else b
+
+        pairs = {eff: scored([fit_pair(eff, i) for i in range(len(folds))]) for eff in others}
+        if pairs:
+            current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, per_fold,
+                                         scored, cfg)
+        for eff, sc in pairs.items():
+            gain, folds_ok, _gw = _gain(sc, current_sc)
+            ev = evidence(sc, current_sc, EFFECT_MODELS[eff].added, cfg)
             plaus, why = _plausible(eff, sc, full, cfg)
-            if not above_noise:
-                plaus, why = False, f"held-out residual {1e3 * base_rms:.3f} µm is at the noise floor"
             ok = ev["significant"] and gain >= cfg.min_relevant and plaus
-            rank = ev["minus_log10_p"]
-            if ok and rank > best_gain:
-                best_name, best_gain = eff, rank
-            candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
-                                         sigs, [], why, base_sc.raw_rms, ev))
-        # 4. greedy forward selection: the best single effect, then a second on top of it
-        chosen_first = best_name  # by the forward step, whatever order the verdict names them in
-        if best_name is not None:
-            accepted = [best_name]
-            current_sc = singles[best_name]
-            # a second effect must matter on its own too: only singles that passed are tried
-            others = [c.effect for c in sorted(candidates, key=lambda c: -c.score["minus_log10_p"])
-                      if c.accepted and c.effect != best_name][: 1 if long_rec else 2]
-            best2, best2_gain, best2_sc = None, 0.0, None
-            round2 = []
-            say(f"trying a second effect on top of {best_name}")
-
-            def fit_pair(eff: str, i: int, tr: Chunk) -> ModelSpec:
-                # the pair is fitted jointly, searched from either single model (each effect's
-                # fit alone moved the base into its own valley, where the other's starts may
-                # not reach the pair's): the lower training cost wins.  A dead time held at
-                # the centre of the delays that fit equally well alone is free again.
-                a = search(singles[best_name].specs[i].released(), eff, tr, loc, cfg)
-                b = search(singles[eff].specs[i].released(), best_name, tr, loc, cfg)
-                return a if sse(a, tr) <= sse(b, tr) else b
-
-            jobs = {(eff, i): pool.submit(fit_pair, eff, i, tr) for eff in others for i, (tr, _te) in enumerate(folds)}
-            pairs = {eff: scored([jobs[(eff, i)].result() for i in range(len(folds))]) for eff in others}
-            if pairs:
-                current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, per_fold,
-                                             scored, cfg)
-            for eff, sc in pairs.items():
-                gain, folds_ok, _gw = _gain(sc, current_sc)
-                ev = evidence(sc, current_sc, EFFECT_MODELS[eff].added, cfg)
-                plaus, why = _plausible(eff, sc, full, cfg)
-                ok = ev["significant"] and gain >= cfg.min_relevant and plaus
-                round2.append((eff, sc, gain, folds_ok, ok, why, ev))
-                if ok and ev["minus_log10_p"] > best2_gain:
-                    best2, best2_gain, best2_sc = eff, ev["minus_log10_p"], sc
-            for eff, sc, gain, folds_ok, ok, why, ev in round2:
-                candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
-                                             cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev))
-            if best2 is not None:
-                accepted.append(best2)
-                current_sc = best2_sc
-                # backward step of the stepwise selection: the first effect must still earn
-                # its parameters, by the same rule, next to the second alone (a small gap
-                # across a stiff contact can stand in for a mode it only mimics)
-                alone = singles[best2]
-                if not _earns(current_sc, alone, best_name, cfg):
-                    dropped, accepted, current_sc, chosen_first = best_name, [best2], alone, best2
-                elif (evidence(current_sc, alone, EFFECT_MODELS[best_name].added, cfg)["minus_log10_p"]
-                      < best2_gain):
-                    # both stay; the one whose removal would cost the more evidence is named first
-                    accepted = [best2, best_name]
-        # "accepted" means in the final model; an effect that passed alone but lost the
-        # stepwise selection says so in its score
-        for j, c in enumerate(candidates):
-            if "added_to" not in c.score:  # an effect alone on the base
-                candidates[j] = replace(c, accepted=c.effect == chosen_first, score={**c.score, "passed_alone": c.accepted})
-            elif dropped and c.accepted:  # the second effect, now standing alone
-                why = f"{dropped} dropped: not significant next to {c.effect} alone"
-                candidates[j] = replace(c, accepted=False, score={**c.score, "backward_step": why})
-    finally:
-        pool.shutdown()
+            round2.append((eff, sc, gain, folds_ok, ok, why, ev))
+            if ok and ev["minus_log10_p"] > best2_gain:
+                best2, best2_gain, best2_sc = eff, ev["minus_log10_p"], sc
+        for eff, sc, gain, folds_ok, ok, why, ev in round2:
+            candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
+                                         cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev))
+        if best2 is not None:
+            accepted.append(best2)
+            current_sc = best2_sc
+            # backward step of the stepwise selection: the first effect must still earn
+            # its parameters, by the same rule, next to the second alone (a small gap
+            # across a stiff contact can stand in for a mode it only mimics)
+            alone = singles[best2]
+            if not _earns(current_sc, alone, best_name, cfg):
+                dropped, accepted, current_sc, chosen_first = best_name, [best2], alone, best2
+            elif (evidence(current_sc, alone, EFFECT_MODELS[best_name].added, cfg)["minus_log10_p"]
+                  < best2_gain):
+                # both stay; the one whose removal would cost the more evidence is named first
+                accepted = [best2, best_name]
+    # "accepted" means in the final model; an effect that passed alone but lost the
+    # stepwise selection says so in its score
+    for j, c in enumerate(candidates):
+        if "added_to" not in c.score:  # an effect alone on the base
+            candidates[j] = replace(c, accepted=c.effect == chosen_first, score={**c.score, "passed_alone": c.accepted})
+        elif dropped and c.accepted:  # the second effect, now standing alone
+            why = f"{dropped} dropped: not significant next to {c.effect} alone"
+            candidates[j] = replace(c, accepted=False, score={**c.score, "backward_step": why})
 
     # 5. a load the motion does not cause: described, and added as an input where it is
     external = _external_force(base, full, folds[0][1] if validation is not None else None, disturbance, cfg)

@@ -60,6 +60,10 @@ class Effect:
     scale_floor: dict[str, float] = {}
     #: per-parameter difference steps that hold whatever the base step
     fd_step: dict[str, float] = {}
+    #: two-mass variants (a stiff contact or a mode inside the loop) simulate on up to
+    #: 16 sub-steps a sample: their searches take 3-5x the others' and are started first,
+    #: so the diagnosis's two worker threads end together
+    two_mass: bool = False
 
     def free(self, spec: ModelSpec) -> list[str]:
         raise NotImplementedError
@@ -107,6 +111,7 @@ class Backlash(Effect):
 
     name = "backlash"
     added = 2
+    two_mass = True
     scale_floor = {"gap_mm": 1e-3}
     #: over the gap the cost is a parabola with ±20 % ripple at 0.1 % steps (contacts on
     #: sub-step boundaries): with 0.1 % differences the gap never moves from its start
@@ -206,6 +211,7 @@ class Resonance(Effect):
 
     name = "resonance"
     added = 3
+    two_mass = True
     scale_floor = {"gain": 0.1}
 
     def free(self, spec):
