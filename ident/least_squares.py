@@ -2,7 +2,8 @@
 
 The output-error refinement (:mod:`ident.refine`) and the candidate fits of the diagnosis
 (:mod:`ident.diagnosis.candidates`) minimise a simulation's mismatch over a handful of
-parameters inside a box.  Both use :func:`bounded_lm`.
+parameters inside a box.  Both use :func:`bounded_lm`; :func:`secant_lm`, its secant
+version, spends fewer simulations an iteration where a budget matters more than accuracy.
 """
 
 from __future__ import annotations
@@ -206,7 +207,7 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
         z_new = _trial(z, A, g, free, lam, lb, ub) if np.all(np.isfinite(A)) else None
         if z_new is None:  # no usable step from this J: differences again, or give up
             if fails >= _TRIALS or nfev + n > max_nfev:
-                break
+                return LMResult(z, cost, nfev, "no usable step: the Jacobian gives no finite damped step")
             J = jacobian()
             lam, fails = lam * 10.0, fails + 1
             continue

@@ -205,6 +205,7 @@ def test_secant_lm_stops_when_no_step_can_be_computed():
     res = secant_lm(resid, [0.0, 0.0], [-1.0, -1.0], [1.0, 1.0], max_nfev=50)
     np.testing.assert_array_equal(res.z, [0.0, 0.0])
     assert res.nfev == len(resid.points) <= 50
+    assert res.message.startswith("no usable step")
 
 
 def test_the_module_imports_numpy_only():

@@ -224,7 +224,7 @@ class _Scored:
             return [float(r @ r) if np.all(np.isfinite(r)) else math.inf for r in self.raw_r]
 
 
-def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold, scored,
+def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, pool: ThreadPoolExecutor, scored,
                     cfg: DiagnosisConfig = DEFAULT) -> "_Scored":
     """The reference model (effects ``keep`` only) with the lowest training cost per fold.
 
@@ -232,10 +232,9 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, per_fold
     from every other scored spec's parameters with the extra effects removed.  A re-fit
     that wins on training cost but predicts a fold's held-out data worse than the given
     one is not taken for that fold (a reference that is poor on held-out data would credit
-    any effect with the difference).
+    any effect with the difference).  The re-fits are jobs of ``pool``.
     """
     ref = scs[0]
-    pool = per_fold.pool  # type: ignore[attr-defined]
 
     def refit(i: int, s0: ModelSpec):
         s0 = s0.copy()
@@ -594,8 +593,6 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         jobs = [pool.submit(fn, i, tr, te, *[l[i] for l in lists]) for i, (tr, te) in enumerate(folds)]
         return [j.result() for j in jobs]
 
-    per_fold.pool = pool  # type: ignore[attr-defined]
-
     def scored(specs: list[ModelSpec]) -> _Scored:
         rs = [residual(s, te) for s, (_, te) in zip(specs, folds)]
         raw = [simulate_spec(s, te)[te.score] - te.x[te.score] for s, (_, te) in zip(specs, folds)]
@@ -628,7 +625,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     # carried the base parameters into a better one.  Re-fit the base model from every
     # candidate's base parameters (effect removed) and compare with the best base found,
     # so an effect is credited only with what the effect itself explains.
-    base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, per_fold, scored, cfg)
+    base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, pool, scored, cfg)
     # the lag of sampling (at most a sample: TimeDelay.within_inherent_lag) is part of
     # the base, not an effect: when a dead time within it earns its parameter by
     # the acceptance rule, the base with that lag is the reference every effect must beat
@@ -685,7 +682,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
 
         pairs = {eff: scored([fit_pair(eff, i) for i in range(len(folds))]) for eff in others}
         if pairs:
-            current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, per_fold,
+            current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, pool,
                                          scored, cfg)
         for eff, sc in pairs.items():
             gain, folds_ok, _gw = _gain(sc, current_sc)
