@@ -7,8 +7,9 @@ fits and report, ``agent identify --against`` and the virtual machine
 * the base parameters θ = (a1, a2, a3, b0, b1, b2, d0, d1) of eq. 3.3;
 * the effects of SPEC §7 that the diagnosis accepted, by name, with the parameters in
   the words of :func:`ident.diagnosis.candidates.effect_parameters` (``gap_mm``, ``delay_s`` …);
-* the controller form the diagnosis fitted (``continuous`` eq. 3.3, or ``sampled``: the
-  control law evaluated once per sample and held);
+* the controller form the diagnosis fitted (``continuous`` eq. 3.3, ``sampled``: the
+  control law evaluated once per sample and held, or ``sampled_causal``: the same with the
+  feed-forward differentiating the command as the drive receives it);
 * the preview shift of the identification (§4.3.2, samples the command is advanced by).
 
 A plain model (no effects, continuous) is simulated by :func:`ident.simulation.simulate`,
@@ -50,7 +51,7 @@ class AxisModel:
     effects : mapping effect name -> parameters
         Accepted SPEC §7 effects with their parameters (``{"backlash": {"gap_mm": 0.02, ...}}``).
     controller : str
-        ``continuous`` or ``sampled``.
+        ``continuous``, ``sampled`` or ``sampled_causal`` (:data:`ident.diagnosis.augmented.CONTROLLERS`).
     """
 
     model: DriveModel
@@ -63,8 +64,10 @@ class AxisModel:
         unknown = set(self.effects) - set(EFFECT_NAMES)
         if unknown:
             raise InputError(f"unknown effect {sorted(unknown)[0]!r} (known: {', '.join(EFFECT_NAMES)})")
-        if self.controller not in ("continuous", "sampled"):
-            raise InputError(f"controller {self.controller!r}: continuous or sampled")
+        from ident.diagnosis.augmented import CONTROLLERS
+
+        if self.controller not in CONTROLLERS:
+            raise InputError(f"controller {self.controller!r}: one of {', '.join(CONTROLLERS)}")
         if not self.sample_period > 0:
             raise InputError(f"sample period must be > 0 s, got {self.sample_period}")
 
@@ -105,14 +108,14 @@ class AxisModel:
     # -- the augmented simulator's arrays ----------------------------------------------
     def spec_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(θ, flags, ep, modes) in the layout of :mod:`ident.diagnosis.augmented`."""
-        from ident.diagnosis.augmented import EFFECTS, N_EP, N_MODES
+        from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, N_EP, N_MODES
         from ident.diagnosis.effects import EFFECT_MODELS
 
         theta = np.array([getattr(self.model, k) for k in BASE_KEYS], dtype=float)
         flags = np.array([1 if e in self.effects else 0 for e in EFFECTS], dtype=np.int64)
         ep = np.zeros(N_EP)
         modes = np.zeros(N_MODES, dtype=np.int64)
-        modes[4] = 1 if self.controller == "sampled" else 0
+        modes[4] = CONTROLLERS.index(self.controller)
         for name in EFFECTS:  # in the simulator's order: effects may share a slot (ψ)
             if name in self.effects:
                 EFFECT_MODELS[name].set_arrays(self.effects[name], ep, modes)

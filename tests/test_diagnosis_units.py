@@ -503,3 +503,40 @@ def test_the_search_finds_a_gap_the_base_model_has_absorbed(x_r):
     fitted = search(base, "backlash", chunk, {})
     assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.25)
     assert sse(fitted, chunk) < 0.5 * sse(base, chunk)
+
+
+# the P-PI drive above with full velocity and acceleration feed-forward (b0 = 1, b1 = a1,
+# b2 = a2): the feed-forward reads the command's derivatives, so how the drive takes them shows
+THETA_FF = np.concatenate([THETA[:3], [1.0, THETA[0], THETA[1]], THETA[6:]])
+
+
+def _backward_differences(x_r: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    v, a = np.zeros_like(x_r), np.zeros_like(x_r)
+    bounds = np.append(np.flatnonzero(starts), x_r.size)
+    for s, e in zip(bounds[:-1], bounds[1:]):
+        v[s + 1:e] = np.diff(x_r[s:e]) / Ts
+        a[s + 1:e] = np.diff(v[s:e]) / Ts
+    return v, a
+
+
+def test_the_causal_feed_forward_is_the_sampled_law_fed_backward_differences(x_r):
+    starts = segment_starts(x_r.size, (np.arange(x_r.size) > x_r.size // 2).astype(int))
+    causal = simulate_augmented(x_r, x_r, Ts, THETA_FF, modes=np.array([0, 0, 0, 0, 2]), starts=starts)
+    fed = simulate_augmented(x_r, x_r, Ts, THETA_FF, modes=np.array([0, 0, 0, 0, 1]), starts=starts,
+                             derivs=_backward_differences(x_r, starts))
+    ahead = simulate_augmented(x_r, x_r, Ts, THETA_FF, modes=np.array([0, 0, 0, 0, 1]), starts=starts)
+    np.testing.assert_allclose(causal, fed, rtol=0, atol=1e-12)
+    # half a sample late in velocity, a sample in acceleration: a tracking error of its own
+    assert np.max(np.abs(causal - ahead)) > 0.1 * np.max(np.abs(x_r - ahead))
+
+
+def test_the_base_model_takes_the_control_law_the_drive_uses(x_r):
+    from ident.diagnosis.candidates import base_variants
+
+    x = simulate_augmented(x_r, x_r, Ts, THETA_FF, modes=np.array([0, 0, 0, 0, 2]))
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    start = ModelSpec(THETA_FF * np.array([1.1, 0.9, 1.2, 1.0, 1.1, 0.9, 1.0, 1.0]))
+    variants = base_variants(start, chunk)
+    assert [int(v.modes[4]) for v in sorted(variants, key=lambda v: v.modes[4])] == [0, 1, 2]
+    assert variants[0].modes[4] == 2
+    assert sse(variants[0], chunk) < 0.5 * sse(variants[1], chunk)

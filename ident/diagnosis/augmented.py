@@ -40,11 +40,17 @@ saturation      ``u`` clipped to ``±limit`` mm/s² [10].  Mode 0: integral froz
                 velocity loops, and overshoots once the limit lets go
 ==============  =========================================================================
 
-Sampled controller (``modes[4] = 1``): ``u`` is computed once per sample from the positions
-read at t_k — velocity by backward difference of the motor position, integral as a
+Sampled controller (``modes[4] = 1`` or ``2``): ``u`` is computed once per sample from the
+positions read at t_k — velocity by backward difference of the motor position, integral as a
 rectangular sum including the current error — and held over the sample (ZOH), like the
-virtual CNC's digital loop; the plant is still integrated on sub-steps.  Otherwise the loop
-is continuous (eq. 3.3 as written).
+virtual CNC's digital loop; the plant is still integrated on sub-steps.  The feed-forward
+terms read the command's derivatives at t_k: with ``modes[4] = 1`` as given ahead by an
+interpolator (central differences, :func:`command_derivatives`); with ``modes[4] = 2`` as a
+drive that only sees the commands received so far takes them (causal backward differences,
+``ẋ_r,k = (x_r,k − x_r,k−1)/Ts``, ``ẍ_r,k = (ẋ_r,k − ẋ_r,k−1)/Ts``, zero at a segment's first
+sample), half a sample late in velocity and a whole sample in acceleration — the HAL ``pid``
+component's and most servo amplifiers' feed-forward.  Otherwise the loop is continuous (eq.
+3.3 as written).
 
 Integration: semi-implicit Euler on ``nsub`` sub-steps per sample, ``nsub`` chosen so that
 the fastest pole moves at most 0.15 rad per sub-step (see :func:`substeps`); commanded
@@ -69,6 +75,7 @@ __all__ = [
     "N_EP",
     "MODE_SLOTS",
     "N_MODES",
+    "CONTROLLERS",
     "command_derivatives",
     "segment_starts",
     "substeps",
@@ -102,10 +109,13 @@ EP_INDEX: dict[str, int] = {
 }
 N_EP = 13
 #: Variant slots of the ``modes`` vector: backlash, time_delay, cyclic_error, resonance,
-#: controller (0 continuous, 1 sampled), saturation (0 anti-windup, 1 none).
+#: controller (0 continuous, 1 sampled, 2 sampled with causal feed-forward differences),
+#: saturation (0 anti-windup, 1 none).
 MODE_SLOTS: dict[str, int] = {"backlash": 0, "time_delay": 1, "cyclic_error": 2, "resonance": 3,
                               "controller": 4, "saturation": 5}
 N_MODES = 6
+#: The control law's variants by their value in the controller slot (``modes[4]``).
+CONTROLLERS: tuple[str, ...] = ("continuous", "sampled", "sampled_causal")
 #: Frequency of the motor–table contact of a backlash gap in the two-mass variant, Hz.
 CONTACT_HZ = 400.0
 
@@ -249,6 +259,9 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
     ei = 0.0
     tw = 2.0 * math.pi / per
     sampled = modes[4] != 0
+    causal = modes[4] == 2
+    vb = 0.0
+    vb_prev = 0.0
     xm_prev = 0.0
     xw = 0.0
     wind_x = True
@@ -266,6 +279,8 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
             q = 0.0
             qd = 0.0
             ei = (a2 * xm - b2 * xr[k]) / a3 if a3 != 0.0 else 0.0
+            vb = 0.0
+            vb_prev = 0.0
             for i in range(nbuf):
                 buf[i] = 0.0
             bi = 0
@@ -295,7 +310,13 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
                     vfb = (xm - xm_prev) / Ts if not first else 0.0
                     xm_prev = xm
                     ei_new = ei + Ts * (xr[k] - xfb)
-                    u_h = b0 * ar[k] + b1 * vr[k] + b2 * xr[k] + a3 * ei_new - a2 * xp - a1 * vfb
+                    if causal:  # the command's derivatives as the drive can take them
+                        vb_prev = vb
+                        vb = (xr[k] - xr[k - 1]) / Ts if not starts[k] else 0.0
+                        u_h = b0 * (vb - vb_prev) / Ts + b1 * vb
+                    else:
+                        u_h = b0 * ar[k] + b1 * vr[k]
+                    u_h += b2 * xr[k] + a3 * ei_new - a2 * xp - a1 * vfb
                     wind_h = True
                     if on_sa:
                         # integrand of the loop's integral: e, or a3·e − ψ·a2·ẋ_motor (P-PI)
@@ -449,7 +470,8 @@ def simulate_augmented(
         Variant of backlash (0 semi-closed loop, 1 two-mass full-closed loop), time delay
         (0 capture, 1 actuation), cyclic error (0 position error, 1 disturbance),
         resonance (0 filter on the recorded position, 1 two-mass mode inside the loop),
-        controller (0 continuous, 1 sampled with zero-order hold) and saturation (0
+        controller (0 continuous, 1 sampled with zero-order hold, 2 the same with causal
+        feed-forward differences) and saturation (0
         anti-windup, 1 none), slots :data:`MODE_SLOTS`; shorter arrays are padded with zeros.
     starts : ndarray of bool (N,)
         First sample of each segment (see :func:`segment_starts`); default one segment.

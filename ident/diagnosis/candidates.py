@@ -43,8 +43,8 @@ if TYPE_CHECKING:
     from ident.regression import Regression
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
-           "sampled_base", "softened_base", "effect_parameters", "cascade_motor_share", "chunk_regression",
-           "delayed_regression_start", "centre_delay"]
+           "sampled_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
+           "chunk_regression", "delayed_regression_start", "centre_delay"]
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
@@ -324,17 +324,38 @@ def delayed_regression_start(chunk: Chunk, m: int, reg: Regression | None = None
     return ModelSpec(np.array([alpha_1, 1.0, alpha_i, beta_2, beta_1, beta_0, d_plus, d_minus]) * a2)
 
 
-def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30) -> ModelSpec:
+def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool = False) -> ModelSpec:
     """``spec`` on the sampled controller (u computed every Ts and held), base re-fitted.
 
+    ``causal``: the feed-forward takes the command's derivatives by backward differences,
+    as a drive that sees only the commands received so far (``modes[4] = 2``, see
+    :mod:`ident.diagnosis.augmented`); otherwise as an interpolator hands them over.
     Started from :func:`softened_base` when the continuous base is stiff (a pole beyond
     1/Ts would make the sampled loop unstable).
     """
     s = softened_base(spec, chunk.Ts) or spec.copy()
-    s.modes[4] = 1
+    s.modes[4] = 2 if causal else 1
     # twice, as the base itself: the restart re-scales the parameters after the first long move
     return fit_spec(fit_spec(s, chunk, fit_effects=False, max_iter=max_iter), chunk, fit_effects=False,
                     max_iter=max_iter)
+
+
+def base_variants(spec: ModelSpec, chunk: Chunk, pool=None) -> list[ModelSpec]:
+    """The base model on every control law of :data:`~ident.diagnosis.augmented.CONTROLLERS`,
+    best training fit first.
+
+    ``spec`` itself (continuous, eq. 3.3 as written) and the sampled law re-fitted with the
+    feed-forward's command derivatives handed over ahead (central differences, an
+    interpolator's) and taken causally (backward differences, a drive's own): which a drive
+    uses is not known from outside, and the wrong one leaves a lag of half a sample to a
+    sample on every move that a dead time or a mode would otherwise take up.  ``pool``
+    (an executor) fits the two sampled forms side by side.
+    """
+    if pool is None:
+        fitted = [sampled_base(spec, chunk, causal=c) for c in (False, True)]
+    else:
+        fitted = [j.result() for j in [pool.submit(sampled_base, spec, chunk, causal=c) for c in (False, True)]]
+    return sorted([spec] + fitted, key=lambda s: sse(s, chunk))
 
 
 def softened_base(spec: ModelSpec, Ts: float, pole_ts: float = 0.15, force: bool = False) -> ModelSpec | None:

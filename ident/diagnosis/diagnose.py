@@ -9,8 +9,9 @@
 3. **explains and models**: for each effect of SPEC §7 (an object of
    :mod:`ident.diagnosis.effects`) an augmented model fitted by the one output-error search
    of :mod:`ident.diagnosis.candidates`, started where that evidence points, on top of the
-   base — eq. 3.3 with a continuous or a sampled control law, whichever fits better (starts
-   on both: an effect may have its valley on the other only);
+   base — eq. 3.3 with a continuous or a sampled control law, the sampled one's
+   feed-forward reading the command's derivatives ahead or causally, whichever fits best
+   (starts on the next best too: an effect may have its valley there only);
    each is scored on held-out data — the validation recording when given, otherwise
    two-fold cross-validation over the halves of every segment — against the base model
    re-fitted by the same procedure, so re-fitting alone earns nothing;
@@ -38,8 +39,8 @@ from typing import Any, Callable
 import numpy as np
 
 from core.errors import InputError
-from ident.diagnosis.augmented import EFFECTS, segment_starts
-from ident.diagnosis.candidates import fit_spec, sampled_base, search, softened_base
+from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, segment_starts
+from ident.diagnosis.candidates import base_variants, fit_spec, search, softened_base
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, TimeDelay, effect_parameters
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
@@ -534,13 +535,11 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     # (twice: the restart re-scales the parameters after a long first move)
     base = fit_base(ModelSpec(theta), full, pool)
     # the base model is eq. 3.3 with a continuous control law or the same law sampled and
-    # held (a digital drive): whichever fits the identification recording better in free
-    # run, once, for every candidate on top of it
-    sampled = sampled_base(base, full)
-    if sse(sampled, full) < sse(base, full):
-        base, other = sampled, base
-    else:
-        other = sampled
+    # held (a digital drive), its feed-forward taking the command's derivatives as an
+    # interpolator hands them over or causally, as the drive receives the commands:
+    # whichever fits the identification recording best in free run is the base of every
+    # candidate, the next best a second start of each search
+    base, other = base_variants(base, full, pool)[:2]
     x_hat0 = simulate_spec(base, full)
     if against is not None:
         against = np.asarray(against, dtype=float).ravel()
@@ -750,7 +749,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         })
     aug = {"base": dict(zip(_BASE_KEYS, map(float, final.theta))),
            "effects": {e: effect_parameters(final, e) for e in accepted},
-           "controller": "sampled" if final.modes[4] else "continuous",
+           "controller": CONTROLLERS[int(final.modes[4])],
            "held_out": scheme}
     named = accepted + (["external_force"] if external is not None and external.accepted else [])
     verdict: str | list[str]

@@ -141,7 +141,7 @@ class ModelSpec:
 
     @property
     def sampled(self) -> bool:
-        """True on the sampled controller (u computed every Ts and held)."""
+        """True on a sampled controller (u computed every Ts and held; either feed-forward)."""
         return bool(self.modes[MODE_SLOTS["controller"]])
 
 

@@ -1,0 +1,24 @@
+"""AxisModel: the controller form the diagnosis fitted travels with the model."""
+
+from __future__ import annotations
+
+import pytest
+
+from core.errors import InputError
+from ident.axis_model import AxisModel
+from ident.model import DriveModel
+
+BASE = dict(a1=372.76, a2=62009.83, a3=1527104.87, b0=1.0, b1=372.76, b2=62009.83, d0=441.0, d1=-302.0)
+
+
+@pytest.mark.parametrize("controller, slot", [("continuous", 0), ("sampled", 1), ("sampled_causal", 2)])
+def test_the_controller_form_survives_json_and_sets_the_simulators_slot(controller, slot):
+    m = AxisModel(DriveModel(**BASE), 0.001, controller=controller)
+    back = AxisModel.from_dict(m.to_dict())
+    assert back.controller == controller
+    assert int(back.spec_arrays()[3][4]) == slot
+
+
+def test_an_unknown_controller_form_is_a_one_line_error():
+    with pytest.raises(InputError, match="controller 'digital': one of continuous, sampled, sampled_causal"):
+        AxisModel(DriveModel(**BASE), 0.001, controller="digital")
