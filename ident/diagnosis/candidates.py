@@ -351,11 +351,8 @@ def base_variants(spec: ModelSpec, chunk: Chunk, pool=None) -> list[ModelSpec]:
     sample on every move that a dead time or a mode would otherwise take up.  ``pool``
     (an executor) fits the two sampled forms side by side.
     """
-    if pool is None:
-        fitted = [sampled_base(spec, chunk, causal=c) for c in (False, True)]
-    else:
-        fitted = [j.result() for j in [pool.submit(sampled_base, spec, chunk, causal=c) for c in (False, True)]]
-    return sorted([spec] + fitted, key=lambda s: sse(s, chunk))
+    fitted = (pool.map if pool is not None else map)(lambda c: sampled_base(spec, chunk, causal=c), (False, True))
+    return sorted([spec, *fitted], key=lambda s: sse(s, chunk))
 
 
 def softened_base(spec: ModelSpec, Ts: float, pole_ts: float = 0.15, force: bool = False) -> ModelSpec | None:
