@@ -22,3 +22,16 @@ def test_the_controller_form_survives_json_and_sets_the_simulators_slot(controll
 def test_an_unknown_controller_form_is_a_one_line_error():
     with pytest.raises(InputError, match="controller 'digital': one of continuous, sampled, sampled_causal"):
         AxisModel(DriveModel(**BASE), 0.001, controller="digital")
+
+
+def test_a_model_is_checked_without_loading_the_diagnosis_signal_processing():
+    # every identification builds an AxisModel, with or without the diagnosis: checking its
+    # controller form must not import scipy.signal (half a second of `agent identify`)
+    import subprocess
+    import sys
+
+    code = ("import sys; from ident.axis_model import AxisModel; from ident.model import DriveModel; "
+            f"AxisModel(DriveModel(**{BASE!r}), 0.001, controller='sampled_causal'); "
+            "print('scipy.signal' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"

@@ -29,7 +29,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import signal
 
 from ident.diagnosis.residuals import excursion_blocks, reversal_times, time_since
 
@@ -59,6 +58,8 @@ BLOCK_ROUNDS = 4
 
 def _lowpass(y: np.ndarray, Ts: float, f_hz: float, starts: np.ndarray) -> np.ndarray:
     """Zero-phase 2nd-order Butterworth low-pass per segment (edges padded by reflection)."""
+    from scipy import signal  # half a second to import: only when the diagnosis runs
+
     out = np.array(y, dtype=float, copy=True)
     wn = min(f_hz * 2.0 * Ts, 0.99)
     b, a = signal.butter(2, wn)

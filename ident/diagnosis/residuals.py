@@ -20,7 +20,6 @@ Every figure is a plain float/list so the result drops straight into the JSON of
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 __all__ = [
     "reversal_times",
@@ -242,6 +241,8 @@ def spectrum_peaks(r: np.ndarray, Ts: float, count: int = 3, f_min: float = 2.0)
     the slow tracking-error residual does not mask it), and its prominence over the
     spectrum's median (ratio).
     """
+    from scipy import signal  # half a second to import: only when the diagnosis runs
+
     nper = int(min(r.size, max(256, 2 ** int(np.log2(max(r.size // 8, 256))))))
     f, P = signal.welch(r - r.mean(), fs=1.0 / Ts, nperseg=nper)
     tot = float(np.sum(P)) or 1.0
@@ -414,6 +415,8 @@ def localise(
     res["spectrum_peaks"] = peaks
     res["spectrum_"] = (f, P)
     if n >= 512:
+        from scipy import signal
+
         fc, coh = signal.coherence(a_r, r, fs=1.0 / Ts, nperseg=min(1024, n // 4))
         res["coherence_with_command_mean"] = float(np.mean(coh[fc > 1.0])) if np.any(fc > 1.0) else 0.0
         res["coherence_"] = (fc, coh)
