@@ -137,6 +137,23 @@ def test_position_periodogram_finds_the_period():
     assert share.max() > 0.95
 
 
+def test_position_periodogram_is_the_least_squares_fit_of_every_period():
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.standard_normal(3000)) * 0.01  # a wandering axis, not a grid
+    r = 0.3 + 0.002 * np.cos(2 * np.pi * x / 0.9) + 1e-3 * rng.standard_normal(x.size)
+    periods = np.geomspace(0.05, 2 * np.ptp(x), 37)
+    for constant in (True, False):
+        share, amp = position_periodogram(x, r, periods, constant=constant)
+        y = r - r.mean() if constant else r
+        for P, sh, c in zip(periods, share, amp):
+            ph = 2 * np.pi * x / P
+            A = np.column_stack([np.sin(ph), np.cos(ph)] + ([np.ones_like(x)] if constant else []))
+            coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+            fit = A @ coef
+            assert sh == pytest.approx(float(fit @ fit) / float(y @ y), rel=1e-7, abs=1e-12)
+            assert c == pytest.approx(coef[0] + 1j * coef[1], rel=1e-6, abs=1e-12)
+
+
 def test_whiteness_passes_noise_and_fails_a_smooth_residual():
     rng = np.random.default_rng(1)
     u = rng.standard_normal(5000)
@@ -503,6 +520,30 @@ def test_the_search_finds_a_gap_the_base_model_has_absorbed(x_r):
     fitted = search(base, "backlash", chunk, {})
     assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.25)
     assert sse(fitted, chunk) < 0.5 * sse(base, chunk)
+
+
+def test_the_race_of_a_long_recording_fits_no_more_than_race_seconds_of_it(x_r, monkeypatch):
+    # a ranking needs a number of moves, not a share of the recording: the race's rounds
+    # fit (¼, ½, 1) of race_seconds, and only the winner's polish sees every sample
+    from dataclasses import replace
+
+    import ident.diagnosis.candidates as cand
+    from ident.diagnosis.config import DEFAULT
+
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["gap_mm"]] = 0.02
+    x = simulate_augmented(x_r, x_r, Ts, THETA_PID, flags=np.array([1, 0, 0, 0, 0, 0]), ep=ep)
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    cap_s = 0.3 * x_r.size * Ts
+    sizes = []
+    fit = cand.fit_spec
+    monkeypatch.setattr(cand, "fit_spec", lambda spec, ch, **kw: sizes.append(ch.n) or fit(spec, ch, **kw))
+    cand.search(ModelSpec(THETA_PID.copy()), "backlash", chunk, {}, replace(DEFAULT, race_seconds=cap_s))
+    race, polish = sizes[:-1], sizes[-1]
+    assert polish == x_r.size
+    skip = 0.02 / Ts  # the restart transient, never scored, comes with every part
+    assert max(race) <= cap_s / Ts + skip + 1
+    assert sorted(set(race)) == pytest.approx([cap_s / Ts / 4, cap_s / Ts / 2, cap_s / Ts], abs=skip + 2)
 
 
 # the P-PI drive above with full velocity and acceleration feed-forward (b0 = 1, b1 = a1,

@@ -15,12 +15,13 @@ bounds and scales (:mod:`ident.diagnosis.effects`):
    events make the cost ripple on a fine scale) on the first quarter of every segment
    (:meth:`Chunk.part <ident.diagnosis.spec.Chunk.part>`); the better half by training
    cost (and the best of every variant) goes on to the first half of every segment, then
-   to the whole chunk.  Ranking starts after a short fit is unreliable — the base
+   to the whole chunk (or, when ``config.race_seconds`` is set, ¼, ½ and all of that
+   many seconds of it: an option, off by default — see its note).  Ranking starts after a short fit is unreliable — the base
    identified without the effect has absorbed it, and the right start can cost the most
    until the base has moved back — and early rounds on part of the recording are cheap,
    so every start gets enough iterations for that before it is compared;
-4. **polish** — the winner's joint fit continued on the whole chunk, then with the fine
-   difference step.
+4. **polish** — the winner's joint fit continued on the whole chunk (every sample), then
+   with the fine difference step.
 
 A weakly determined dead time is then moved to the middle of the delays that fit equally
 well (:func:`centre_delay`).  Every fit works in scaled coordinates ``z = p / s`` (s = |start|
@@ -197,9 +198,12 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     alive = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
     if not alive:
         return base.with_effect(effect)
-    # 3. race: joint fits on a growing share of the recording, the worse half dropped after each round
+    # 3. race: joint fits on a growing share of the recording (of race_seconds of it when
+    # set), the worse half dropped after each round
+    span = chunk.n * chunk.Ts
+    cap = min(1.0, cfg.race_seconds / span) if cfg.race_seconds > 0 else 1.0
     for r, (frac, it) in enumerate(zip(cfg.race_fidelity, cfg.race_iter)):
-        part = chunk.part(frac)
+        part = chunk.part(frac * cap)
         nfev = cfg.race_evals[r] if cfg.race_evals else 0
         alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, secant_nfev=nfev, cfg=cfg)
                  for s in alive]

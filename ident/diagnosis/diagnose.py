@@ -576,15 +576,6 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
             scheme = "two-fold cross-validation over interleaved blocks"
         else:  # long recordings: one fold keeps the diagnosis within its time budget
             scheme = "hold-out of interleaved blocks"
-    # the equivalent input disturbance of the base model, and where it fails on held-out data
-    disturbance = _disturbance(base, full)
-    loc_val = None
-    if validation is not None:
-        te0 = folds[0][1]
-        r_val = simulate_spec(base, te0) - te0.x
-        loc_val = localise(r_val, te0.x_r, te0.x, *te0.derivs, Ts, te0.starts)
-        loc_val["fit_pct"] = _fit_pct(te0.x_r - te0.x, r_val)
-        disturbance["validation"] = _disturbance(base, te0)
     e_test = np.concatenate([te.x_r[te.score] - te.x[te.score] for _, te in folds])
 
     def per_fold(fn, *lists):
@@ -617,6 +608,16 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     heavy_first = sorted(effects, key=lambda e: not EFFECT_MODELS[e].two_mass)
     jobs = {(eff, i): pool.submit(fit_one, eff, i, tr) for eff in heavy_first for i, (tr, _te) in enumerate(folds)}
     say(f"fitting {len(effects)} effects")
+    # while the workers search: the equivalent input disturbance of the base model, and
+    # where the base fails on held-out data (the searches need neither)
+    disturbance = _disturbance(base, full)
+    loc_val = None
+    if validation is not None:
+        te0 = folds[0][1]
+        r_val = simulate_spec(base, te0) - te0.x
+        loc_val = localise(r_val, te0.x_r, te0.x, *te0.derivs, Ts, te0.starts)
+        loc_val["fit_pct"] = _fit_pct(te0.x_r - te0.x, r_val)
+        disturbance["validation"] = _disturbance(base, te0)
     for k, eff in enumerate(effects):
         singles[eff] = scored([jobs[(eff, i)].result() for i in range(len(folds))])
         say(f"fitted {eff} ({k + 1}/{len(effects)})")

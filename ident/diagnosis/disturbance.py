@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from ident.diagnosis.residuals import excursion_blocks, reversal_times, time_since
+from ident.diagnosis.residuals import excursion_blocks, position_periodogram, reversal_times, time_since
 
 __all__ = ["equivalent_disturbance", "analyse_disturbance", "block_input", "DISTURBANCE_BAND_HZ"]
 
@@ -252,16 +252,12 @@ def analyse_disturbance(w: np.ndarray, x_r: np.ndarray, x: np.ndarray, v_r: np.n
     # position: the best single period of a periodogram against position
     span = float(np.ptp(x))
     if span > 0:
-        best = (0.0, None)
-        for P in np.geomspace(max(span / 500.0, 0.05), span, 120):
-            ph = 2 * np.pi * x / P
-            A = np.column_stack([np.sin(ph), np.cos(ph)])
-            s, _ = _explained(wl, A)
-            if s > best[0]:
-                best = (s, A, P)
-        if best[1] is not None:
-            families["position"] = best[1]
-            res["position_period_mm"] = float(best[2])
+        periods = np.geomspace(max(span / 500.0, 0.05), span, 120)
+        share, _ = position_periodogram(x, wl, periods, constant=False)
+        if np.max(share) > 0.0:
+            P = float(periods[int(np.argmax(share))])
+            families["position"] = np.column_stack([np.sin(2 * np.pi * x / P), np.cos(2 * np.pi * x / P)])
+            res["position_period_mm"] = P
     # time since the last reversal, signed by the new direction
     since = time_since(reversal_times(v_r, starts, v_eps), n, Ts)
     families["after_reversal"] = np.column_stack(

@@ -208,24 +208,42 @@ def _bins(values: np.ndarray, r: np.ndarray, edges: list[float], unit: str) -> l
 
 
 def position_periodogram(
-    x: np.ndarray, r: np.ndarray, periods_mm: np.ndarray
+    x: np.ndarray, r: np.ndarray, periods_mm: np.ndarray, constant: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
     """Share of residual variance explained by ``c_s sin(2πx/P) + c_c cos(2πx/P)`` per period P.
 
     A least-squares (Lomb–Scargle-like) periodogram of the residual against position, mm;
     returns (explained share per period, complex amplitude c_s + j·c_c per period, mm).
+    With ``constant`` an offset is fitted alongside (r's mean taken out first), otherwise
+    the pair alone explains r.  Each period's fit is the 2×2 normal equations of the sine
+    and cosine columns (centred with ``constant``: the same coefficients as the fit with an
+    offset column), solved for a block of periods at once.
     """
-    rc = r - r.mean()
+    x = np.asarray(x, dtype=float)
+    rc = r - r.mean() if constant else np.asarray(r, dtype=float)
     den = float(rc @ rc) or 1.0
+    periods_mm = np.asarray(periods_mm, dtype=float)
     share = np.zeros(periods_mm.size)
     amp = np.zeros(periods_mm.size, dtype=complex)
-    for i, P in enumerate(periods_mm):
-        ph = 2.0 * np.pi * x / P
-        A = np.column_stack([np.sin(ph), np.cos(ph), np.ones_like(x)])
-        coef, *_ = np.linalg.lstsq(A, rc, rcond=None)
-        fit = A @ coef
-        share[i] = float(fit @ fit) / den
-        amp[i] = coef[0] + 1j * coef[1]
+    block = max(1, 400_000 // max(x.size, 1))  # periods per block: a few MB of sines
+    for i0 in range(0, periods_mm.size, block):
+        ph = (2.0 * np.pi / periods_mm[i0 : i0 + block])[:, None] * x[None, :]
+        S, C = np.sin(ph), np.cos(ph)
+        if constant:
+            S -= S.mean(axis=1, keepdims=True)
+            C -= C.mean(axis=1, keepdims=True)
+        gss, gcc, gsc = (np.einsum("ij,ij->i", S, S), np.einsum("ij,ij->i", C, C),
+                         np.einsum("ij,ij->i", S, C))
+        bs, bc = S @ rc, C @ rc
+        det = gss * gcc - gsc ** 2
+        for j in range(det.size):
+            if det[j] > 1e-12 * gss[j] * gcc[j] and det[j] > 0:
+                a = (gcc[j] * bs[j] - gsc[j] * bc[j]) / det[j]
+                b = (gss[j] * bc[j] - gsc[j] * bs[j]) / det[j]
+            else:  # sine and cosine (nearly) collinear over the travel: minimum-norm fit
+                (a, b), *_ = np.linalg.lstsq(np.column_stack([S[j], C[j]]), rc, rcond=None)
+            share[i0 + j] = (a * bs[j] + b * bc[j]) / den
+            amp[i0 + j] = a + 1j * b
     return share, amp
 
 
