@@ -16,10 +16,11 @@ bounds and scales (:mod:`ident.diagnosis.effects`):
    (:meth:`Chunk.part <ident.diagnosis.spec.Chunk.part>`); the better half by training
    cost (and the best of every variant) goes on to the first half of every segment, then
    to the whole chunk (or, when ``config.race_seconds`` is set, ¼, ½ and all of that
-   many seconds of it: an option, off by default — see its note).  Ranking starts after a short fit is unreliable — the base
-   identified without the effect has absorbed it, and the right start can cost the most
-   until the base has moved back — and early rounds on part of the recording are cheap,
-   so every start gets enough iterations for that before it is compared;
+   many seconds of it: an option, off by default — see its note).  Ranking starts after
+   a short fit is unreliable — the base identified without the effect has absorbed it,
+   and the right start can cost the most until the base has moved back — and early
+   rounds on part of the recording are cheap, so every start gets enough iterations for
+   that before it is compared;
 4. **polish** — the winner's joint fit continued on the whole chunk (every sample), then
    with the fine difference step.
 
