@@ -29,11 +29,16 @@ import numpy as np
 from core.errors import InputError
 from ident.model import DriveModel
 
-__all__ = ["AxisModel", "BASE_KEYS", "EFFECT_NAMES"]
+__all__ = ["AxisModel", "BASE_KEYS", "EFFECT_NAMES", "CONTROLLERS"]
 
 BASE_KEYS = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
-#: SPEC §7 effects an axis model can carry (external_force is described, never simulated).
+#: SPEC §7 effects an axis model can carry (external_force is described, never simulated),
+#: in the order of the augmented simulator's flag vector.
 EFFECT_NAMES = ("backlash", "stribeck", "resonance", "time_delay", "cyclic_error", "saturation")
+#: The control law's forms, in the order of the augmented simulator's controller slot
+#: (``modes[4]``): eq. 3.3 as written, sampled and held, and sampled with the feed-forward
+#: differentiating the command causally.
+CONTROLLERS = ("continuous", "sampled", "sampled_causal")
 
 
 @dataclass(frozen=True)
@@ -51,7 +56,7 @@ class AxisModel:
     effects : mapping effect name -> parameters
         Accepted SPEC §7 effects with their parameters (``{"backlash": {"gap_mm": 0.02, ...}}``).
     controller : str
-        ``continuous``, ``sampled`` or ``sampled_causal`` (:data:`ident.diagnosis.augmented.CONTROLLERS`).
+        ``continuous``, ``sampled`` or ``sampled_causal`` (:data:`CONTROLLERS`).
     """
 
     model: DriveModel
@@ -64,8 +69,6 @@ class AxisModel:
         unknown = set(self.effects) - set(EFFECT_NAMES)
         if unknown:
             raise InputError(f"unknown effect {sorted(unknown)[0]!r} (known: {', '.join(EFFECT_NAMES)})")
-        from ident.diagnosis.augmented import CONTROLLERS
-
         if self.controller not in CONTROLLERS:
             raise InputError(f"controller {self.controller!r}: one of {', '.join(CONTROLLERS)}")
         if not self.sample_period > 0:
@@ -108,7 +111,7 @@ class AxisModel:
     # -- the augmented simulator's arrays ----------------------------------------------
     def spec_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(θ, flags, ep, modes) in the layout of :mod:`ident.diagnosis.augmented`."""
-        from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, N_EP, N_MODES
+        from ident.diagnosis.augmented import EFFECTS, N_EP, N_MODES
         from ident.diagnosis.effects import EFFECT_MODELS
 
         theta = np.array([getattr(self.model, k) for k in BASE_KEYS], dtype=float)

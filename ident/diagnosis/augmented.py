@@ -69,6 +69,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ident.axis_model import CONTROLLERS, EFFECT_NAMES
+
 __all__ = [
     "EFFECTS",
     "EP_INDEX",
@@ -82,15 +84,9 @@ __all__ = [
     "simulate_augmented",
 ]
 
-#: The effects of SPEC §7 in a fixed order; the flag vector follows it.
-EFFECTS: tuple[str, ...] = (
-    "backlash",
-    "stribeck",
-    "resonance",
-    "time_delay",
-    "cyclic_error",
-    "saturation",
-)
+#: The effects of SPEC §7 in a fixed order; the flag vector follows it (the axis model's
+#: vocabulary, one list for the model and its simulator).
+EFFECTS: tuple[str, ...] = EFFECT_NAMES
 #: Index of each effect parameter in the effect-parameter vector ``ep``.
 EP_INDEX: dict[str, int] = {
     "gap_mm": 0,
@@ -114,8 +110,8 @@ N_EP = 13
 MODE_SLOTS: dict[str, int] = {"backlash": 0, "time_delay": 1, "cyclic_error": 2, "resonance": 3,
                               "controller": 4, "saturation": 5}
 N_MODES = 6
-#: The control law's variants by their value in the controller slot (``modes[4]``).
-CONTROLLERS: tuple[str, ...] = ("continuous", "sampled", "sampled_causal")
+# CONTROLLERS (imported above, re-exported): the control law's variants by their value in
+# the controller slot (``modes[4]``).
 #: Frequency of the motor–table contact of a backlash gap in the two-mass variant, Hz.
 CONTACT_HZ = 400.0
 
