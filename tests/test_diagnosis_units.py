@@ -262,6 +262,43 @@ def test_two_mass_backlash_position_term_can_read_the_motor(x_r):
     assert np.max(np.abs(on_motor - on_table)) > 0.3 * 0.03 / 2
 
 
+def _one_move(D: float = 5.0, a: float = 2000.0, rest_s: float = 1.0) -> np.ndarray:
+    """One move of D mm: accelerate, brake at the same rate (triangular velocity), then rest."""
+    ta = np.sqrt(D / a)
+    t = np.arange(int(2 * ta / Ts) + 1) * Ts
+    pos = np.where(t < ta, 0.5 * a * t**2, D - 0.5 * a * (2 * ta - t) ** 2)
+    return np.concatenate([np.zeros(100), pos, np.full(int(rest_s / Ts), D)])
+
+
+def test_a_semi_closed_table_with_inertia_runs_across_the_gap_when_the_motor_brakes():
+    # loop on the motor, table recorded: a massless table stopped by its friction stays half a
+    # gap behind the motor (mode 0); a table with inertia and almost no friction is pulled
+    # back by the motor's far side while braking, so it rests half a gap *ahead* (mode 2)
+    gap = 0.1
+    x_r = _one_move()
+    theta = THETA.copy()
+    theta[6:] = (1.0, -1.0)  # almost no friction
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["gap_mm"]] = gap
+    ep[EP_INDEX["motor_fraction"]] = 0.5
+    flags = np.array([1, 0, 0, 0, 0, 0])
+    massless = simulate_augmented(x_r, x_r, Ts, theta, flags=flags, ep=ep, modes=np.array([0, 0, 0, 0, 0, 0]))
+    inertia = simulate_augmented(x_r, x_r, Ts, theta, flags=flags, ep=ep, modes=np.array([2, 0, 0, 0, 0, 0]))
+    assert massless[-1] == pytest.approx(x_r[-1] - gap / 2, abs=0.1 * gap)
+    assert inertia[-1] == pytest.approx(x_r[-1] + gap / 2, abs=0.1 * gap)
+
+
+def test_the_sub_steps_of_a_two_mass_gap_are_the_same_for_fits_and_scores():
+    from ident.diagnosis.augmented import CONTACT_HZ, model_substeps, substeps
+    from ident.diagnosis.spec import sim_substeps
+
+    for mode in (1, 2):  # both two-mass variants resolve the stiff contact
+        s = ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": 0.1, "motor_fraction": 0.5}, mode)
+        # fit_spec (sim_substeps) and simulate_spec (the simulator's default) agree
+        assert sim_substeps(s, Ts) == model_substeps(s.theta, Ts, s.flags(), s.ep, s.modes)
+        assert sim_substeps(s, Ts) == substeps(s.theta, Ts, 1.5 * CONTACT_HZ)
+
+
 def _actuation_delay_recording(x_r: np.ndarray, delay_s: float):
     """A chunk recorded from the P-PI drive on the sampled controller with a dead time on u."""
     ep = np.zeros(N_EP)

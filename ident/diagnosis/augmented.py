@@ -16,10 +16,16 @@ backlash        dead band of width ``gap_mm`` [0] between motor (x) and table.  
                 position is recorded.  Mode 1 (full-closed loop, as most CNC axes): two
                 masses, motor (share ``motor_fraction`` [11] of the inertia, read by the
                 velocity term) and table (carries the friction, read by the position loop
-                and recorded), coupled by a stiff contact across the gap.  The position
+                and recorded), coupled by a stiff contact across the gap
+                (:data:`CONTACT_HZ`, :data:`CONTACT_DAMPING`).  The position
                 term reads ``(1 − ψ)·x_table + ψ·x_motor``, ψ = position_motor_share [12]
                 (0: PID on the scale; ≈ 0.8: P-PI cascade, whose velocity integral is the
-                motor position); the integral term always reads the table
+                motor position); the integral term always reads the table.  Mode 2
+                (semi-closed loop with the table's inertia): the two masses of mode 1,
+                every loop term reading the motor, the table recorded — the table crosses
+                the gap when the force it needs changes sign (it coasts ahead into the gap
+                when the motor brakes harder than its friction can), not at the motor's
+                reversal as the massless table of mode 0 does
 stribeck        breakaway friction ``r·d`` at rest falling to Coulomb ``d`` with speed,
                 ``d(v) = d·(1 + (r − 1)·exp(−(v/v_s)²))``; r = static_to_coulomb_ratio [1],
                 v_s = stribeck_velocity_mm_s [2]
@@ -81,6 +87,7 @@ __all__ = [
     "command_derivatives",
     "segment_starts",
     "substeps",
+    "model_substeps",
     "simulate_augmented",
 ]
 
@@ -112,8 +119,10 @@ MODE_SLOTS: dict[str, int] = {"backlash": 0, "time_delay": 1, "cyclic_error": 2,
 N_MODES = 6
 # CONTROLLERS (imported above, re-exported): the control law's variants by their value in
 # the controller slot (``modes[4]``).
-#: Frequency of the motor–table contact of a backlash gap in the two-mass variant, Hz.
+#: Frequency and damping ratio of the motor–table contact of a backlash gap in the two-mass
+#: variants, Hz and –.
 CONTACT_HZ = 400.0
+CONTACT_DAMPING = 0.5
 
 
 def segment_starts(n: int, segment: np.ndarray | None) -> np.ndarray:
@@ -159,6 +168,18 @@ def substeps(theta: np.ndarray, Ts: float, freq_hz: float = 0.0) -> int:
         lam = 1e4
     lam = max(lam, 2.0 * math.pi * freq_hz, abs(a1))
     return int(min(max(math.ceil(Ts * lam / 0.15), 1), 16))
+
+
+def model_substeps(theta: np.ndarray, Ts: float, flags: np.ndarray, ep: np.ndarray, modes: np.ndarray) -> int:
+    """Sub-steps per sample for the augmented model: :func:`substeps` with its fastest mode.
+
+    A resonance's mode, or the stiff contact (:data:`CONTACT_HZ`) of a two-mass backlash
+    variant, at 1.5 × its frequency: a damped mode's closed-loop poles sit above the free one.
+    """
+    f = ep[3] if flags[2] else 0.0
+    if flags[0] and modes[0] >= 1 and not (flags[2] and modes[3] >= 1):
+        f = max(f, CONTACT_HZ)
+    return substeps(theta, Ts, 1.5 * f)
 
 
 @njit(cache=True, nogil=True)
@@ -219,10 +240,10 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
     mu = ep[11] if ep[11] > 0.0 else 1.0
     psi = ep[12]
     sa_windup = on_sa and modes[5] == 1
-    bl_loop = on_bl and modes[0] == 1
+    bl_loop = on_bl and modes[0] >= 1
     rs_two = on_rs and modes[3] >= 1
     # semi-closed two-mass drive: every loop term reads the motor, the table is recorded
-    fb_motor = rs_two and modes[3] == 2
+    fb_motor = (rs_two and modes[3] == 2) or (bl_loop and modes[0] == 2)
     two = bl_loop or rs_two
     if two:
         # two-mass drive: motor (share mu of J) and table coupled by a spring-damper whose
@@ -230,7 +251,7 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
         if mu <= 0.0 or mu >= 1.0:
             mu = 0.8
         wc = wr if rs_two else 2.0 * math.pi * CONTACT_HZ
-        zc = zr if rs_two else 0.5
+        zc = zr if rs_two else CONTACT_DAMPING
         mred = mu * (1.0 - mu)
         kc = wc * wc * mred
         cdmp = 2.0 * zc * wc * mred
@@ -463,7 +484,8 @@ def simulate_augmented(
     ep : ndarray (13,)
         Effect parameters laid out as :data:`EP_INDEX`.
     modes : ndarray of int (6,)
-        Variant of backlash (0 semi-closed loop, 1 two-mass full-closed loop), time delay
+        Variant of backlash (0 semi-closed loop, 1 two-mass full-closed loop, 2 two-mass
+        semi-closed loop), time delay
         (0 capture, 1 actuation), cyclic error (0 position error, 1 disturbance),
         resonance (0 filter on the recorded position, 1 two-mass mode inside the loop),
         controller (0 continuous, 1 sampled with zero-order hold, 2 the same with causal
@@ -493,10 +515,7 @@ def simulate_augmented(
     if not (np.all(np.isfinite(th)) and np.all(np.isfinite(e))) or e[6] < 0.0 or e[6] > 1.0:
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:
-        f = e[3] if fl[2] else 0.0
-        if fl[0] and md[0] == 1 and not (fl[2] and md[3] >= 1):
-            f = max(f, CONTACT_HZ)
-        nsub = substeps(th, Ts, f)
+        nsub = model_substeps(th, Ts, fl, e, md)
     out = np.empty(n)
     out_u = np.empty(n) if u_out is None else u_out
     _kernel(

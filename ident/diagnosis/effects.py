@@ -106,8 +106,9 @@ def _concentration(loc: dict, share: str, time_share: str) -> float:
 
 
 class Backlash(Effect):
-    """A dead band between motor and table (mode 0: loop on the motor, table recorded;
-    mode 1: two masses across a stiff contact, the loop reading the table)."""
+    """A dead band between motor and table (mode 0: loop on the motor, a massless table
+    recorded; mode 1: two masses across a stiff contact, the loop reading the table; mode 2:
+    the two masses with the loop on the motor and the table recorded)."""
 
     name = "backlash"
     added = 2
@@ -120,7 +121,7 @@ class Backlash(Effect):
     start_gaps_mm = (0.003, 0.01, 0.03, 0.1, 0.3)
 
     def free(self, spec):
-        return ["gap_mm", "motor_fraction"] if self.variant(spec) == 1 else ["gap_mm"]
+        return ["gap_mm", "motor_fraction"] if self.variant(spec) >= 1 else ["gap_mm"]
 
     def bounds(self, name, p0, chunk, cfg):
         return (0.0, 1.0) if name == "gap_mm" else super().bounds(name, p0, chunk, cfg)
@@ -138,11 +139,19 @@ class Backlash(Effect):
             s.theta[6] -= shift
             s.theta[7] += shift
             out.append(s)
+            # semi-closed with the table's inertia: every loop term reads the motor (ψ = 1 in
+            # the offset above); the motor-only loop holds no integral on the table
+            s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": 0.0}, 2)
+            shift = s.theta[1] * 0.5 * g
+            s.theta[6] -= shift
+            s.theta[7] += shift
+            out.append(s)
         return out
 
     def parameters(self, spec):
         ep = spec.ep
-        out = {"gap_mm": float(ep[0]), "loop": "table_fed_back" if spec.modes[0] else "table_recorded"}
+        loop = ("table_recorded", "table_fed_back", "table_recorded_two_mass")[int(spec.modes[0])]
+        out = {"gap_mm": float(ep[0]), "loop": loop}
         if spec.modes[0]:
             out["motor_fraction"] = float(ep[11])
             out["position_motor_share"] = float(ep[12])
@@ -150,8 +159,8 @@ class Backlash(Effect):
 
     def set_arrays(self, p, ep, modes):
         ep[0] = p["gap_mm"]
-        if p.get("loop") == "table_fed_back":
-            modes[0] = 1
+        if p.get("loop") in ("table_fed_back", "table_recorded_two_mass"):
+            modes[0] = 1 if p["loop"] == "table_fed_back" else 2
             ep[11] = p.get("motor_fraction", 0.5)
             ep[12] = p.get("position_motor_share", 0.0)
 

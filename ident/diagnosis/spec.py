@@ -11,15 +11,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ident.diagnosis.augmented import (
-    CONTACT_HZ,
     EFFECTS,
     EP_INDEX,
     MODE_SLOTS,
     N_EP,
     N_MODES,
     command_derivatives,
+    model_substeps,
     simulate_augmented,
-    substeps,
 )
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "sim_substeps"]
@@ -176,7 +175,5 @@ def sse(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> float:
 
 
 def sim_substeps(spec: ModelSpec, Ts: float) -> int:
-    f = spec.ep[EP_INDEX["freq_hz"]] if "resonance" in spec.effects else 0.0
-    if "backlash" in spec.effects and spec.modes[0] == 1 and not ("resonance" in spec.effects and spec.modes[3] >= 1):
-        f = max(f, CONTACT_HZ)
-    return substeps(spec.theta, Ts, 1.5 * f)
+    """Sub-steps per sample of ``spec``'s simulation (:func:`~ident.diagnosis.augmented.model_substeps`)."""
+    return model_substeps(spec.theta, Ts, spec.flags(), spec.ep, spec.modes)
