@@ -35,3 +35,21 @@ def test_a_model_is_checked_without_loading_the_diagnosis_signal_processing():
             "print('scipy.signal' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("mode", [0, 1, 2])
+def test_every_backlash_variant_the_diagnosis_reports_is_the_one_the_model_simulates(mode):
+    # the diagnosis's words (parameters) and the model's arrays (set_arrays) are one mapping
+    import numpy as np
+
+    from ident.diagnosis.effects import EFFECT_MODELS
+    from ident.diagnosis.spec import ModelSpec
+
+    theta = np.array(list(BASE.values()))
+    two_mass = {"motor_fraction": 0.6, "position_motor_share": 0.3 if mode == 1 else 0.0} if mode else {}
+    spec = ModelSpec(theta).with_effect("backlash", {"gap_mm": 0.05, **two_mass}, mode)
+    words = EFFECT_MODELS["backlash"].parameters(spec)
+    m = AxisModel.from_dict(AxisModel(DriveModel(**BASE), 0.001, effects={"backlash": words}).to_dict())
+    _theta, _flags, ep, modes = m.spec_arrays()
+    assert int(modes[0]) == mode
+    assert np.allclose(ep, spec.ep)
