@@ -131,21 +131,18 @@ class Backlash(Effect):
         out = []
         for g in self.start_gaps_mm:
             out.append(base.with_effect(self.name, {"gap_mm": g}, 0))
-            s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": psi}, 1)
-            # with the motor leading the table by half the gap in steady motion, a position
-            # term reading the motor in part (share ψ) sees an offset a2·ψ·g/2 against the
-            # motion, which the base fitted without the gap took as Coulomb friction
-            shift = s.theta[1] * psi * 0.5 * g
-            s.theta[6] -= shift
-            s.theta[7] += shift
-            out.append(s)
-            # semi-closed with the table's inertia: every loop term reads the motor (ψ = 1 in
-            # the offset above); the motor-only loop holds no integral on the table
-            s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8, "position_motor_share": 0.0}, 2)
-            shift = s.theta[1] * 0.5 * g
-            s.theta[6] -= shift
-            s.theta[7] += shift
-            out.append(s)
+            # two masses: the loop on the table, its position term reading the motor in part
+            # (share ψ); or semi-closed with the table's inertia, every loop term on the motor
+            for mode, share, reads_motor in ((1, psi, psi), (2, 0.0, 1.0)):
+                s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8,
+                                                 "position_motor_share": share}, mode)
+                # with the motor leading the table by half the gap in steady motion, a loop
+                # term reading the motor (share ψ) sees an offset a2·ψ·g/2 against the motion,
+                # which the base fitted without the gap took as Coulomb friction: given back
+                offset = s.theta[1] * reads_motor * 0.5 * g
+                s.theta[6] -= offset
+                s.theta[7] += offset
+                out.append(s)
         return out
 
     def parameters(self, spec):
