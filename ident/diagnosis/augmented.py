@@ -65,7 +65,8 @@ Velocities live at half sub-steps in this scheme, so on the sampled controller t
 sub-step of a sample, which straddles the switch of the held ``u``, gets the mean of the
 old and new value: without it the model leads the digital loop by half a sub-step (0.25 ms
 at nsub = 2 on a PID drive), and a fitted dead time would take that up.
-Every contiguous segment restarts at rest at the recorded actual position.
+Every contiguous segment restarts at rest at the recorded actual position, or, at a warm
+start (a window cut out of a longer recording, ``warm``), on the recorded state mid-move.
 """
 
 from __future__ import annotations
@@ -209,7 +210,7 @@ def _friction_step(v: float, F: float, h: float, m: float, d0: float, d1: float,
 
 
 @njit(cache=True, nogil=True)
-def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
+def _kernel(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, th, flags, ep, modes, out, out_u):
     a1 = th[0]
     a2 = th[1]
     a3 = th[2]
@@ -298,8 +299,59 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
             ei = (a2 * xm - b2 * xr[k]) / a3 if a3 != 0.0 else 0.0
             vb = 0.0
             vb_prev = 0.0
+            u0 = 0.0
+            if warm[k]:
+                # restart mid-move on the recorded state: position, velocity and (through
+                # the integral, holding the force against friction) acceleration, a gap's
+                # far side leading the table the way the command moves
+                vk = vw[k]
+                ak = aw[k]
+                if on_td and not td_loop:  # the recording lags the drive by the capture delay
+                    xm += tau * (vk + 0.5 * tau * ak)
+                    vk += tau * ak
+                    xt = xm
+                if on_cy and not cy_force:  # the recording holds the position error too
+                    xm -= cs * math.sin(tw * xm) + cc * math.cos(tw * xm)
+                    xt = xm
+                v = vk - 0.5 * h * ak  # semi-implicit Euler: velocities at half sub-steps
+                vt = v
+                lvl = 0.0
+                if vk != 0.0:
+                    lvl = d0 if vk > 0.0 else d1
+                    if on_st:
+                        lvl *= 1.0 + (rs - 1.0) * math.exp(-(vk / vs) ** 2)
+                u0 = ak + lvl
+                if cy_force:  # the drive overcomes the position-periodic force as well
+                    u0 += cs * math.sin(tw * xm) + cc * math.cos(tw * xm)
+                if two:
+                    # the coupling carries the table's inertia and friction: a gap closed on
+                    # the side that force pushes, the spring or contact compressed by it
+                    fc = (1.0 - mu) * ak + lvl
+                    if fc != 0.0:
+                        xm = xt + fc / kc + (half_c if fc > 0.0 else -half_c)
+                elif on_bl:  # a table held by its friction is pushed the way the command moves
+                    sv = vr[k] if vr[k] != 0.0 else vk
+                    if sv != 0.0:
+                        xm = xt + (half if sv > 0.0 else -half)
+                xw = xm
+                xfb = xt if (two and not fb_motor) else xm
+                vf = v
+                e_int = 0.0
+                ff = b0 * ar[k] + b1 * vr[k]
+                if sampled:  # the loop reads a backward difference, integrates before u
+                    vf = vk - 0.5 * Ts * ak
+                    xm_prev = xm - vf * Ts
+                    e_int = Ts * (xr[k] - xfb)
+                    vb = vr[k] - 1.5 * ar[k] * Ts  # the causal feed-forward's last difference
+                    if causal:
+                        ff = b0 * ar[k] + b1 * (vr[k] - 0.5 * ar[k] * Ts)
+                    u_last = u0
+                    u_h = u0
+                    first = False
+                if a3 != 0.0:
+                    ei = (u0 - ff - b2 * xr[k] + a2 * ((1.0 - psi) * xfb + psi * xw) + a1 * vf) / a3 - e_int
             for i in range(nbuf):
-                buf[i] = 0.0
+                buf[i] = u0
             bi = 0
         y = xt if (on_bl or two) else xm
         if on_rs and not rs_two:
@@ -329,7 +381,10 @@ def _kernel(xr, vr, ar, x0, starts, Ts, nsub, th, flags, ep, modes, out, out_u):
                     ei_new = ei + Ts * (xr[k] - xfb)
                     if causal:  # the command's derivatives as the drive can take them
                         vb_prev = vb
-                        vb = (xr[k] - xr[k - 1]) / Ts if not starts[k] else 0.0
+                        if not starts[k]:
+                            vb = (xr[k] - xr[k - 1]) / Ts
+                        else:
+                            vb = vr[k] - 0.5 * ar[k] * Ts if warm[k] else 0.0
                         u_h = b0 * (vb - vb_prev) / Ts + b1 * vb
                     else:
                         u_h = b0 * ar[k] + b1 * vr[k]
@@ -465,6 +520,7 @@ def simulate_augmented(
     derivs: tuple[np.ndarray, np.ndarray] | None = None,
     nsub: int | None = None,
     u_out: np.ndarray | None = None,
+    warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """Free-run recorded position x̂ (mm) of the augmented model for the command ``x_r`` (mm).
 
@@ -499,6 +555,13 @@ def simulate_augmented(
         Sub-steps per sample; default from :func:`substeps`.
     u_out : ndarray (N,), optional
         Filled with the control-equivalent acceleration u (mm/s²) applied at each sample.
+    warm : (mask, v, a), optional
+        Segment starts that restart mid-move (``mask``, bool (N,): a window cut out of a
+        longer recording, :meth:`~ident.diagnosis.spec.Chunk.windows`) and the recorded
+        velocity and acceleration there (mm/s, mm/s², read at those starts only): the model
+        starts at the recorded position and velocity, a gap's far side leading the way the
+        command moves, the integral holding the force of the recorded acceleration against
+        friction — the base model's state exactly.  Default none: every segment starts at rest.
     """
     x_r = np.ascontiguousarray(x_r, dtype=float)
     n = x_r.size
@@ -524,6 +587,9 @@ def simulate_augmented(
         np.ascontiguousarray(derivs[1], dtype=float),
         np.ascontiguousarray(x0, dtype=float),
         np.ascontiguousarray(starts, dtype=np.bool_),
+        *((np.zeros(n, dtype=np.bool_), np.zeros(n), np.zeros(n)) if warm is None else
+          (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
+           np.ascontiguousarray(warm[2], dtype=float))),
         float(Ts),
         int(nsub),
         th,

@@ -12,15 +12,16 @@ bounds and scales (:mod:`ident.diagnosis.effects`):
 3. **race** (successive halving over the share of the recording fitted) — every start
    still in the race gets a few iterations of the joint fit of base and effect (bounded
    Levenberg–Marquardt with the coarse difference step: contact, stick and clipping
-   events make the cost ripple on a fine scale) on the first quarter of every segment
-   (:meth:`Chunk.part <ident.diagnosis.spec.Chunk.part>`); the better half by training
-   cost (and the best of every variant) goes on to the first half of every segment, then
-   to the whole chunk (or, when ``config.race_seconds`` is set, ¼, ½ and all of that
-   many seconds of it: an option, off by default — see its note).  Ranking starts after
-   a short fit is unreliable — the base identified without the effect has absorbed it,
-   and the right start can cost the most until the base has moved back — and early
-   rounds on part of the recording are cheap, so every start gets enough iterations for
-   that before it is compared;
+   events make the cost ripple on a fine scale) on ¼ of ``config.race_seconds`` of the
+   recording, in windows spread over all of it, each restarted mid-move on the recorded
+   state (:meth:`Chunk.windows <ident.diagnosis.spec.Chunk.windows>`); the better half
+   by training cost (and the best of every variant) goes on to ½, then to all of those
+   seconds (``race_seconds`` 0: the first ¼, ½ and all of every segment instead,
+   :meth:`Chunk.part <ident.diagnosis.spec.Chunk.part>`).  Ranking starts after a short
+   fit is unreliable — the base identified without the effect has absorbed it, and the
+   right start can cost the most until the base has moved back — and early rounds on
+   part of the recording are cheap, so every start gets enough iterations for that
+   before it is compared;
 4. **polish** — the winner's joint fit continued on the whole chunk (every sample), then
    with the fine difference step.
 
@@ -127,7 +128,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     def resid(z: np.ndarray) -> np.ndarray:
         th, ep = unpack(z)
         y = simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
-                               starts=chunk.starts, derivs=chunk.derivs, nsub=nsub)
+                               starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
         r = w * (y[m] - chunk.x[m])
         if not np.all(np.isfinite(r)):
             return np.full(r.size, 1e3)
@@ -199,12 +200,17 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     alive = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
     if not alive:
         return base.with_effect(effect)
-    # 3. race: joint fits on a growing share of the recording (of race_seconds of it when
-    # set), the worse half dropped after each round
-    span = chunk.n * chunk.Ts
-    cap = min(1.0, cfg.race_seconds / span) if cfg.race_seconds > 0 else 1.0
+    # 3. race: joint fits on a growing share of race_seconds of the recording (of all of it
+    # when 0), the worse half dropped after each round
+    # windows only where they cut the work at least in half: on a recording barely longer
+    # than race_seconds they cost what it costs and only add restarts (a 6.8 s LinuxCNC
+    # capture lost its 20 µm gap to them)
+    windowed = 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts
     for r, (frac, it) in enumerate(zip(cfg.race_fidelity, cfg.race_iter)):
-        part = chunk.part(frac * cap)
+        if windowed:  # windows spread over the whole recording, warm restarts
+            part = chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
+        else:
+            part = chunk.part(frac)
         nfev = cfg.race_evals[r] if cfg.race_evals else 0
         alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, secant_nfev=nfev, cfg=cfg)
                  for s in alive]

@@ -84,16 +84,24 @@ class DiagnosisConfig:
     #: truth: LinuxCNC 20 µm gap); a quarter of each segment still holds dozens of moves.
     race_fidelity: tuple[float, ...] = (0.25, 0.5, 1.0)
     race_iter: tuple[int, ...] = (8, 8, 8)
-    #: When > 0: "the whole" is at most this many seconds of every recording (the shares
-    #: above are of this span, the first part of every segment) and only the winner's
+    #: When > 0: "the whole" is at most this many seconds of the recording, in windows
+    #: spread over all of it (:meth:`~ident.diagnosis.spec.Chunk.windows`: each restarts
+    #: mid-move on the recorded state, a short lead-in unscored), and only the winner's
     #: polish sees every sample, so a long recording costs the race no more than one of
-    #: this length.  Off: with 10 s the diagnosis median fell from 22.7 to 13.2 s on the
-    #: independent bench's tuning seeds (52/69 against 50/69, report seeds 54/69 against
-    #: 50/69) but drive-zoo-dev lost two of its 16 (a force ripple and a mode called
-    #: ``none``: on a one-segment recording the first rounds see only its first 2.5 s and
-    #: 5 s and rank the right start away; the saturation fits came out poorer too); a last
-    #: round on the whole recording did not bring the ripple back.  See docs/diagnosis.md.
-    race_seconds: float = 0.0
+    #: this length.  A ranking needs a number of moves, not a share of a recording.  6 s:
+    #: on the independent bench's tuning seeds 52/69 against 51/69 (0/10 false alarms
+    #: both) at a median diagnosis of 11.5 s against 25.4 s; drive-zoo-dev 16/21 as
+    #: without it.  (The first 10 s of every segment instead lost two zoo cases: on a
+    #: one-segment recording the early rounds saw only its beginning — stop 28.)  A
+    #: recording shorter than twice this is raced as when 0: windows would save little
+    #: there and add restarts (a 6.8 s LinuxCNC capture lost its 20 µm gap to them).
+    race_seconds: float = 6.0
+    #: Windows of about this many seconds each (see :meth:`~ident.diagnosis.spec.Chunk.windows`) …
+    race_window_s: float = 1.0
+    #: … each restarting mid-move between this long and twice this long before its first
+    #: scored sample (where the recorded position is closest to a parabola: its velocity
+    #: and acceleration read best); the restart's error decays in the unscored lead-in.
+    race_lead_s: float = 0.1
     #: When given, the race's fits in round i are secant Levenberg–Marquardt
     #: (:func:`ident.least_squares.secant_lm`) with ``race_evals[i]`` simulations per start
     #: (0: differences as above, n + 1 simulations an iteration).  Off: on the tuning

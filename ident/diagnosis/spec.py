@@ -43,6 +43,9 @@ class Chunk:
     derivs: tuple[np.ndarray, np.ndarray]
     w: np.ndarray
     score: np.ndarray
+    #: segment starts that restart mid-move and the recorded velocity and acceleration
+    #: there, (mask, v, a) (:meth:`windows`; ``simulate_augmented(warm=)``)
+    warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @property
     def n(self) -> int:
@@ -50,7 +53,7 @@ class Chunk:
 
     def scored(self, mask: np.ndarray) -> "Chunk":
         """The same samples with only ``mask`` (and not the restart transients) scored."""
-        return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, self.w, self.score & mask)
+        return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, self.w, self.score & mask, self.warm)
 
     def part(self, frac: float) -> "Chunk":
         """The first part of every segment holding ``frac`` of its scored samples (a cheaper
@@ -70,9 +73,90 @@ class Chunk:
                 continue
             end = a + int(np.searchsorted(counted, frac * counted[-1])) + 1
             keep[a:end] = True
+        return self._take(keep, self.starts, self.score, self.warm)
+
+    def windows(self, seconds: float, window_s: float = 1.0, lead_s: float = 0.1) -> "Chunk":
+        """About ``seconds`` of the chunk in windows spread evenly over all of it (a cheaper
+        look at the same physics for the early rounds of a search that, unlike :meth:`part`,
+        sees every stretch of the travel, of the program and of both speed sets).
+
+        ``round(seconds / window_s)`` windows (at least one) of equal length, the i-th
+        beginning where i/m of the scored samples lie before it, each inside its segment.
+        A window restarts the simulation mid-move (``warm``: on the command's state, see
+        :func:`~ident.diagnosis.augmented.simulate_augmented`) ``lead_s`` before its first
+        scored sample and that lead-in is not scored: the restart cannot know the state of a
+        gap, a mode or the integral, the lead-in lets them settle.  A window reaching back to
+        its segment's start restarts there at rest, as the whole chunk does.  Returns the
+        chunk itself when it is no longer than ``seconds``.
+        """
+        n_need = int(round(seconds / self.Ts))
+        cum = np.cumsum(self.score)
+        if self.n <= n_need or cum[-1] == 0:
+            return self
+        m = max(1, int(round(seconds / window_s)))
+        length = max(n_need // m, 1)
+        lead = int(round(lead_s / self.Ts))
+        seg_starts = np.flatnonzero(self.starts)
+        seg_ends = np.append(seg_starts[1:], self.n)
+        keep = np.zeros(self.n, dtype=bool)
+        starts = np.zeros(self.n, dtype=bool)
+        warm = np.zeros(self.n, dtype=bool)
+        vw, aw = np.zeros(self.n), np.zeros(self.n)
+        if self.warm is not None:
+            warm[:], vw[:], aw[:] = self.warm
+        score = np.zeros(self.n, dtype=bool)
+        for i in range(m):
+            a = int(np.searchsorted(cum, i * cum[-1] / m + 1))  # first scored sample of window i
+            j = int(np.searchsorted(seg_starts, a, side="right")) - 1
+            lo, hi = int(seg_starts[j]), int(seg_ends[j])
+            b = min(a + length, hi)
+            if a - lead - _HALF <= lo:  # reaches back to the segment's start: restart there, at rest
+                r = lo
+                score[r:b] = self.score[r:b]
+            else:  # restart mid-move where the recorded state is read best
+                r, vw_r, aw_r = _restart_state(self.x, self.derivs[0], max(a - 2 * lead, lo + _HALF), a - lead,
+                                               self.Ts)
+                warm[r], vw[r], aw[r] = True, vw_r, aw_r
+                score[r:b] = self.score[r:b]
+                score[r:a] = False  # the lead-in
+            keep[r:b] = True
+            starts[r] = True
+        return self._take(keep, starts, score, (warm, vw, aw))
+
+    def _take(self, keep: np.ndarray, starts: np.ndarray, score: np.ndarray,
+              warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> "Chunk":
+        """The samples of ``keep`` with the given starts, scored samples and warm restarts."""
         i = np.flatnonzero(keep)
-        return Chunk(self.x_r[i], self.x[i], self.Ts, self.starts[i], (self.derivs[0][i], self.derivs[1][i]),
-                     self.w[i], self.score[i])
+        return Chunk(self.x_r[i], self.x[i], self.Ts, starts[i], (self.derivs[0][i], self.derivs[1][i]),
+                     self.w[i], score[i], None if warm is None else tuple(a[i] for a in warm))
+
+
+#: Samples either side of a warm restart its velocity and acceleration are read from.
+_HALF = 5
+
+
+def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float) -> tuple[int, float, float]:
+    """The sample in [lo, hi] where the recorded position ``x`` is closest to a parabola over
+    the ``_HALF`` samples either side (the acceleration steady: no switch of the command's
+    jerk, no reversal inside), while the command moves (``v_r`` ≠ 0: at rest the side of a
+    gap the table rests on is not known) where it does, with the parabola's slope and
+    curvature there (mm/s, mm/s²): a least-squares fit averages the encoder's quantization
+    and noise that plain differences would amplify.  ``x`` must hold ``_HALF`` samples
+    either side of [lo, hi].
+    """
+    hi = max(hi, lo)
+    t = np.arange(-_HALF, _HALF + 1) * Ts
+    V = np.vander(t, 3)  # columns t², t, 1
+    P = np.linalg.pinv(V)  # (3, 2·_HALF + 1): parabola coefficients from the samples
+    idx = np.arange(lo, hi + 1)[:, None] + np.arange(-_HALF, _HALF + 1)[None, :]
+    X = x[idx]
+    C = X @ P.T
+    misfit = np.sum((X - C @ V.T) ** 2, axis=1)
+    moving = v_r[lo : hi + 1] != 0.0
+    if moving.any():
+        misfit[~moving] = np.inf
+    k = int(np.argmin(misfit))
+    return lo + k, float(C[k, 1]), float(2.0 * C[k, 0])
 
 
 def make_chunk(x_r: np.ndarray, x: np.ndarray, Ts: float, starts: np.ndarray, skip_s: float = 0.02) -> Chunk:
@@ -157,6 +241,7 @@ def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None) -> np.
         starts=chunk.starts,
         derivs=chunk.derivs,
         nsub=nsub,
+        warm=chunk.warm,
     )
 
 
