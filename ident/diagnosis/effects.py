@@ -458,7 +458,7 @@ class Saturation(Effect):
     def starts(self, base, chunk, evidence, cfg):
         u = np.empty(chunk.n)
         simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, base.theta, flags=base.flags(), ep=base.ep,
-                           modes=base.modes, starts=chunk.starts, derivs=chunk.derivs, u_out=u)
+                           modes=base.modes, starts=chunk.starts, derivs=chunk.derivs, u_out=u, warm=chunk.warm)
         au = np.abs(u[np.isfinite(u)])
         # ψ: the share of the position term that is the integral of the motor velocity —
         # 0 for a PID, about 0.8 for a P-PI cascade (it stops or runs on with the integral)

@@ -82,12 +82,13 @@ class Chunk:
 
         ``round(seconds / window_s)`` windows (at least one) of equal length, the i-th
         beginning where i/m of the scored samples lie before it, each inside its segment.
-        A window restarts the simulation mid-move (``warm``: on the command's state, see
-        :func:`~ident.diagnosis.augmented.simulate_augmented`) ``lead_s`` before its first
-        scored sample and that lead-in is not scored: the restart cannot know the state of a
-        gap, a mode or the integral, the lead-in lets them settle.  A window reaching back to
-        its segment's start restarts there at rest, as the whole chunk does.  Returns the
-        chunk itself when it is no longer than ``seconds``.
+        A window restarts the simulation mid-move (``warm``: on the recorded state, see
+        :func:`~ident.diagnosis.augmented.simulate_augmented`) between ``lead_s`` and twice
+        that before its first scored sample, where :func:`_restart_state` reads the state
+        best, and that lead-in is not scored: what the restart cannot know (a mode's phase,
+        an integral wound up in saturation) settles there.  A window reaching back to its
+        segment's start restarts there at rest, as the whole chunk does.  Returns the chunk
+        itself when it is no longer than ``seconds``.
         """
         n_need = int(round(seconds / self.Ts))
         cum = np.cumsum(self.score)
@@ -110,14 +111,13 @@ class Chunk:
             j = int(np.searchsorted(seg_starts, a, side="right")) - 1
             lo, hi = int(seg_starts[j]), int(seg_ends[j])
             b = min(a + length, hi)
-            if a - lead - _HALF <= lo:  # reaches back to the segment's start: restart there, at rest
-                r = lo
-                score[r:b] = self.score[r:b]
-            else:  # restart mid-move where the recorded state is read best
+            r = lo  # reaches back to the segment's start: restart there, at rest
+            if a - lead - _HALF > lo:  # restart mid-move where the recorded state is read best
                 r, vw_r, aw_r = _restart_state(self.x, self.derivs[0], max(a - 2 * lead, lo + _HALF), a - lead,
                                                self.Ts)
                 warm[r], vw[r], aw[r] = True, vw_r, aw_r
-                score[r:b] = self.score[r:b]
+            score[r:b] = self.score[r:b]
+            if r > lo:
                 score[r:a] = False  # the lead-in
             keep[r:b] = True
             starts[r] = True
@@ -144,7 +144,6 @@ def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float) 
     and noise that plain differences would amplify.  ``x`` must hold ``_HALF`` samples
     either side of [lo, hi].
     """
-    hi = max(hi, lo)
     t = np.arange(-_HALF, _HALF + 1) * Ts
     V = np.vander(t, 3)  # columns t², t, 1
     P = np.linalg.pinv(V)  # (3, 2·_HALF + 1): parabola coefficients from the samples
