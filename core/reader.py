@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import struct
 import warnings
 from pathlib import Path
 
@@ -116,7 +117,7 @@ def load_mcap(path: str | Path) -> Recording:
                         events.append(json.loads(record.data))
                 elif isinstance(record, Metadata) and record.name == SUMMARY_METADATA:
                     summary = dict(record.metadata)
-    except (McapError, EOFError, ValueError, KeyError, TypeError, OSError) as exc:
+    except (McapError, EOFError, ValueError, KeyError, TypeError, OSError, struct.error) as exc:  # struct: < 8 bytes
         if isinstance(exc, (KeyError, TypeError)) and samples_channel is not None and not t:
             raise RecordingError(f"{path}: /samples messages are malformed ({exc!r})") from exc
         if samples_channel is None:

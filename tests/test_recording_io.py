@@ -116,3 +116,11 @@ def test_missing_and_non_mcap_files(tmp_path):
     junk.write_bytes(b"this is not mcap at all")
     with pytest.raises(RecordingError, match="not a readable MCAP file"):
         load_recording(junk)
+
+
+def test_a_file_shorter_than_the_mcap_magic_is_not_a_readable_mcap_file(tmp_path):
+    # the mcap reader fails on it with a bare struct.error, before it can check the magic
+    stub = tmp_path / "stub.mcap"
+    stub.write_bytes(b"junk\n")
+    with pytest.raises(RecordingError, match="not a readable MCAP file"):
+        load_recording(stub)
