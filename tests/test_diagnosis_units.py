@@ -505,6 +505,90 @@ def test_an_effect_that_fits_the_training_data_worse_than_its_reference_earns_no
     assert evidence(_Scored([], r1, r1, [1.1]), ref, 1, replace(DEFAULT, nested_training=False))["significant"]
 
 
+def _slow_residual(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A residual like a base model's mismatch: noise through a 10 Hz-ish low-pass (τ ≈ 100 samples)."""
+    from scipy.signal import lfilter
+
+    return lfilter([0.02], [1.0, -0.98], rng.normal(size=n))
+
+
+def test_ar_whitener_recovers_an_ar_process_and_whitens_it():
+    from scipy.signal import lfilter
+
+    from ident.diagnosis.diagnose import ar_whitener, correlation_time
+
+    rng = np.random.default_rng(3)
+    e = rng.normal(size=20_000)
+    r = lfilter([1.0], [1.0, -1.5, 0.7], e)  # AR(2)
+    a = ar_whitener(r, 10)
+    assert a.size - 1 == 2  # BIC picks the true order
+    assert a[1:] == pytest.approx([-1.5, 0.7], abs=0.03)
+    assert correlation_time(r) > 4.0
+    assert correlation_time(lfilter(a, [1.0], r)) == pytest.approx(1.0, abs=0.2)
+
+
+def test_a_sharp_effect_on_a_slow_residual_is_heard_once_the_residuals_are_whitened():
+    from dataclasses import replace
+
+    from ident.diagnosis.config import DEFAULT
+    from ident.diagnosis.diagnose import _Scored, evidence
+
+    rng = np.random.default_rng(4)
+    n = 3000
+    slow = _slow_residual(rng, n)
+    # a gap's signature: short steps at reversals, a tenth of the residual norm
+    gap = np.zeros(n)
+    for i in rng.choice(n - 30, 12, replace=False):
+        gap[i : i + 30] += rng.choice([-1.0, 1.0])
+    gap *= 0.12 * np.linalg.norm(slow) / np.linalg.norm(gap)
+    ref, sc = _Scored([], [slow + gap], [slow + gap], [1.0]), _Scored([], [slow], [slow], [1.0])
+    ev = evidence(sc, ref, 2)
+    assert ev["significant"] and ev["statistic"].startswith("AR-whitened")
+    # counted as N/τ samples of the slow residual the same gain is not significant
+    assert not evidence(sc, ref, 2, replace(DEFAULT, ar_order_max=0))["significant"]
+
+
+def test_a_slow_gain_is_heard_by_the_slow_noise_model():
+    from ident.diagnosis.diagnose import _Scored, evidence
+
+    # like friction at low speed: the effect takes out most of a smooth 0.5 Hz wave, which
+    # whitening by the residual's own AR filter (nearly a difference) all but removes
+    rng = np.random.default_rng(6)
+    rest = _slow_residual(rng, 6000)
+    part = np.sqrt(2.0) * np.std(rest) * np.sin(2.0 * np.pi * 0.5 * 1e-3 * np.arange(6000))
+    r0, r1 = rest + part, rest + 0.2 * part
+    ev = evidence(_Scored([], [r1], [r1], [1.0]), _Scored([], [r0], [r0], [1.0]), 2)
+    assert ev["significant"] and ev["statistic"].startswith("N/τ")
+
+
+def test_fitting_k_parameters_to_a_slow_residual_alone_is_rarely_significant():
+    from ident.diagnosis.diagnose import _Scored, evidence
+
+    from scipy.signal import lfilter
+
+    # the null hypothesis: the "effect" is k = 2 regressors of no meaning fitted to the
+    # held-out residual itself, by least squares in the whitened metric the rule uses (the
+    # most a fit could take out of it): its likelihood ratio is then χ²(2)
+    rng = np.random.default_rng(5)
+    lr = []
+    for _ in range(40):
+        r0 = _slow_residual(rng, 3000)
+        X = np.column_stack([_slow_residual(rng, 3000) + 0.02 * rng.normal(size=3000) for _k in range(2)])
+        w = lambda v: lfilter([1.0, -0.98], [1.0], v, axis=0)  # noqa: E731  (the residual's own whitener)
+        r1 = r0 - X @ np.linalg.lstsq(w(X), w(r0), rcond=None)[0]
+        lr.append(evidence(_Scored([], [r1], [r1], [1.0]), _Scored([], [r0], [r0], [1.0]), 2)["likelihood_ratio"])
+    assert 0.5 < np.mean(lr) < 5.0  # χ²(2) has mean 2
+    assert sum(v > 10.6 for v in lr) <= 1  # its threshold at α/2 = 0.4 %
+
+
+def test_evidence_strength_stays_finite_and_ordered_where_the_p_value_underflows():
+    from ident.diagnosis.diagnose import _minus_log10_sf
+
+    s = [_minus_log10_sf(x, 2) for x in (100.0, 1000.0, 1500.0, 5000.0)]
+    assert all(np.isfinite(s)) and s == sorted(s)
+    assert _minus_log10_sf(1500.0, 1) > _minus_log10_sf(1500.0, 3)
+
+
 def test_a_released_spec_frees_what_a_range_held_and_leaves_the_original_alone():
     spec = ModelSpec(THETA.copy(), ("time_delay",))
     spec.ranges["delay_s"] = (0.001, 0.002)

@@ -27,6 +27,18 @@ class DiagnosisConfig:
     #: data at least as well; one that fits them worse sits in another valley of the base
     #: parameters and its held-out gain is that valley's, not the effect's.
     nested_training: bool = True
+    #: The held-out residuals are coloured: both are whitened by the prediction-error filter
+    #: of an AR model of the augmented model's residual, order ≤ this (least BIC), before
+    #: the likelihood ratio.  10 samples span the loop's fast dynamics at 1 kHz; on the
+    #: one case looked at BIC chose the same order with 30 allowed.  0: the older rule,
+    #: n = N/τ effective samples with τ the residual's correlation time (weaker: it counts
+    #: a sharp effect, a gap at reversals, as if it were as slow as the base's residual).
+    ar_order_max: int = 10
+    #: Of the effects that pass, the first named is the one removing the largest share of
+    #: the held-out residual: the evidence says an effect is real, its size which matters
+    #: most.  (False: the strongest evidence, −log10 p, first — with the whitened statistic
+    #: that ranks a fast effect explaining less above a slow one explaining more.)
+    rank_by_gain: bool = True
     #: A described external load must remove this share of the residual norm …
     min_gain: float = 0.04
     #: … plus this much per parameter it adds (2 per time block).

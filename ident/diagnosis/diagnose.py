@@ -16,11 +16,11 @@
    two-fold cross-validation over the halves of every segment — against the base model
    re-fitted by the same procedure, so re-fitting alone earns nothing;
 4. **accepts** an effect by one statistical rule (:func:`evidence`): the held-out
-   likelihood ratio over the effective number of independent samples exceeds the χ²
+   likelihood ratio, the residuals whitened by an AR noise model, exceeds the χ²
    quantile of the parameters it adds (``config.alpha``), it removes at least ``config.min_relevant`` of
    the held-out residual, and its parameters are the physics its name means
-   (:func:`_plausible`: size bounds, no signature veto); the effect with the largest
-   likelihood ratio wins; greedy forward selection then tries a second one on top by the
+   (:func:`_plausible`: size bounds, no signature veto); of those that pass, the one removing
+   the largest share of the held-out residual wins; greedy forward selection then tries a second one on top by the
    same rule;
 5. **describes** the equivalent input disturbance (:mod:`ident.diagnosis.disturbance`) on
    the identification and validation recordings, and names an ``external_force`` when it
@@ -37,6 +37,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
+from scipy.signal import lfilter
 
 from core.errors import InputError
 from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, segment_starts
@@ -340,18 +341,75 @@ def correlation_time(r: np.ndarray) -> float:
     return float(min(max(tau, 1.0), n / 4.0))
 
 
+def ar_whitener(r: np.ndarray, max_order: int) -> np.ndarray:
+    """Prediction-error filter ``A(q) = 1 + a1 q⁻¹ + … + ap q⁻ᵖ`` of an AR(p) model of ``r``.
+
+    Yule–Walker equations solved by Levinson recursion (``scipy.linalg.solve_toeplitz``),
+    the order p ≤ ``max_order`` the one of least BIC ``N·ln σ²_p + p·ln N``.  ``A(q) r`` is
+    then close to white: the coloured residual's likelihood under that noise model.
+    """
+    from scipy.linalg import solve_toeplitz
+
+    r = np.asarray(r, dtype=float) - float(np.mean(r))
+    n = r.size
+    if n < 4 * max_order or not np.any(r):
+        return np.ones(1)
+    f = np.fft.rfft(r, 2 * n)
+    acf = np.fft.irfft(f * np.conj(f))[: max_order + 1] / n
+    best, best_bic = np.ones(1), n * math.log(max(acf[0], 1e-300))
+    for p in range(1, max_order + 1):
+        try:
+            phi = solve_toeplitz(acf[:p], acf[1 : p + 1])
+        except np.linalg.LinAlgError:
+            break
+        s2 = float(acf[0] - phi @ acf[1 : p + 1])
+        if s2 <= 0:
+            break
+        bic = n * math.log(s2) + p * math.log(n)
+        if bic < best_bic:
+            best, best_bic = np.concatenate(([1.0], -phi)), bic
+    return best
+
+
+def _minus_log10_sf(x: float, k: int) -> float:
+    """−log10 of the χ²(k) survival function at ``x``, finite where the p-value underflows.
+
+    Past ~1400 (k = 2) ``chi2.logsf`` returns −inf and strong effects would tie; there the
+    leading terms of the incomplete gamma function's asymptotic series,
+    ``ln Q(a, y) ≈ (a−1)·ln y − y − ln Γ(a) + ln(1 + (a−1)/y)`` with a = k/2, y = x/2, take over.
+    """
+    from scipy.special import gammaln
+    from scipy.stats import chi2
+
+    ls = float(chi2.logsf(x, k))
+    if not math.isfinite(ls):
+        a, y = 0.5 * k, 0.5 * x
+        ls = (a - 1.0) * math.log(y) - y - float(gammaln(a)) + math.log1p((a - 1.0) / y)
+    return -ls / math.log(10.0)
+
+
 def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAULT) -> dict:
     """The acceptance criterion: held-out likelihood ratio against its χ² threshold.
 
-    For Gaussian residuals the log-likelihood ratio of two models is ``n·ln(SSE_ref/SSE)``;
-    tracking-error residuals are strongly coloured, so ``n`` is the effective number of
-    independent samples, ``N/τ`` per fold with τ the correlation time of the augmented
-    model's residual (:func:`correlation_time`).  The statistic is compared with the
-    ``1 − alpha/2`` quantile (``cfg.alpha``) of χ² with ``k`` degrees of freedom (k = parameters the
-    effect adds).  It is taken on the held-out residual in mm (the SPEC §5 metric) and on
-    the weighted one (the low-speed set heard next to the high-speed set, as the fits
-    weigh it), the larger counting — hence alpha/2 —, never credited when the residual in
-    mm grows.
+    For Gaussian white residuals the log-likelihood ratio of two models is
+    ``n·ln(SSE_ref/SSE)``.  Tracking-error residuals are strongly coloured, and how much a
+    held-out gain weighs depends on the noise model the residual is scored under; two
+    are used, each fitted to the augmented model's residual r₁:
+
+    * slow: the raw residuals, ``n = N/τ`` effective samples per fold, τ the correlation
+      time of r₁ (:func:`correlation_time`) — a gain as slow as the residual (friction
+      at low speed) is heard, a sharp one is under-counted;
+    * fast: both residuals whitened by the prediction-error filter A(q) of an AR model of
+      r₁ (:func:`ar_whitener`, order ≤ ``cfg.ar_order_max`` by BIC; 0 leaves it out), ``n``
+      the samples whitened — each model's likelihood under AR noise, as the
+      prediction-error method scores models (Ljung, *System Identification*, §7.3): a
+      sharp gain (a gap's steps at reversals) is heard, a slow one is under-counted.
+
+    Each is taken on the held-out residual in mm (the SPEC §5 metric) and on the weighted
+    one (the low-speed set heard next to the high-speed set, as the fits weigh it).  The
+    largest of these statistics is compared with the ``1 − alpha/m`` quantile of χ² with
+    ``k`` degrees of freedom (``cfg.alpha``, m statistics: Bonferroni; k = parameters the
+    effect adds), never credited when the residual in mm grows.
 
     The effect's model contains the reference (the effect switched off), so it must also
     fit the training data at least as well (``cfg.nested_training``): one that fits them
@@ -360,27 +418,40 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAU
     """
     from scipy.stats import chi2
 
-    def one(new: list[np.ndarray], old: list[np.ndarray]) -> tuple[float, float]:
+    def one(new: list[np.ndarray], old: list[np.ndarray], whiten: bool) -> tuple[float, float]:
         lr, n_eff = 0.0, 0.0
         for r1, r0 in zip(new, old):
             if not (np.all(np.isfinite(r1)) and np.all(np.isfinite(r0))):
                 return -math.inf, 0.0
-            ne = r1.size / correlation_time(r1)
+            if whiten:
+                a = ar_whitener(r1, cfg.ar_order_max)
+                p = a.size - 1
+                r1 = lfilter(a, [1.0], r1)[p:]
+                r0 = lfilter(a, [1.0], r0)[p:]
+                ne = float(r1.size)
+            else:
+                ne = r1.size / correlation_time(r1)
             s0, s1 = float(r0 @ r0), float(r1 @ r1)
             if s0 > 0 and s1 > 0:
                 lr += ne * math.log(s0 / s1)
                 n_eff += ne
         return lr, n_eff
 
-    (lr_raw, ne_raw), (lr_w, ne_w) = one(sc.raw_r, ref.raw_r), one(sc.test_r, ref.test_r)
-    lr, n_eff = (lr_raw, ne_raw) if lr_raw >= lr_w else (lr_w, ne_w)
-    threshold = float(chi2.ppf(1.0 - cfg.alpha / 2, max(k, 1)))
+    # the statistic under each noise model (slow: N/τ; fast: AR-whitened) on each residual
+    # (mm, weighted): the largest counts, its level Bonferroni-divided among them
+    noise_models = (False, True) if cfg.ar_order_max > 0 else (False,)
+    stats = [(*one(new, old, wh), f"{'AR-whitened' if wh else 'N/τ samples'}, {what}")
+             for wh in noise_models
+             for new, old, what in ((sc.raw_r, ref.raw_r, "mm"), (sc.test_r, ref.test_r, "weighted"))]
+    lr, n_eff, statistic = max(stats, key=lambda t: t[0])
+    threshold = float(chi2.ppf(1.0 - cfg.alpha / len(stats), max(k, 1)))
     raw_ok = sc.raw_sse < ref.raw_sse
     nested = not cfg.nested_training or all(a <= b for a, b in zip(sc.train_sse, ref.train_sse))
     # the strength of the evidence, comparable between effects adding different numbers of
     # parameters: −log10 of the test's p-value (log form: a strong effect's p underflows)
-    strength = float(-chi2.logsf(lr, max(k, 1)) / math.log(10.0)) if math.isfinite(lr) else -math.inf
-    return {"likelihood_ratio": float(lr), "threshold": threshold, "effective_samples": float(n_eff),
+    strength = _minus_log10_sf(lr, max(k, 1)) if math.isfinite(lr) else -math.inf
+    return {"likelihood_ratio": float(lr), "statistic": statistic, "threshold": threshold,
+            "effective_samples": float(n_eff),
             "minus_log10_p": strength, "significant": bool(lr > threshold and raw_ok and nested),
             "fits_training": bool(nested)}
 
@@ -650,7 +721,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         if not above_noise:
             plaus, why = False, f"held-out residual {1e3 * base_rms:.3f} µm is at the noise floor"
         ok = ev["significant"] and gain >= cfg.min_relevant and plaus
-        rank = ev["minus_log10_p"]
+        rank = gain if cfg.rank_by_gain else ev["minus_log10_p"]
         if ok and rank > best_gain:
             best_name, best_gain = eff, rank
         candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
