@@ -10,7 +10,6 @@ to the left of the direction of travel (outside a counter-clockwise circle is ri
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 __all__ = ["contour_error", "path_contour_error", "TIME_WEIGHT"]
 
@@ -37,6 +36,8 @@ def contour_error(path_x: np.ndarray, path_y: np.ndarray, x: np.ndarray, y: np.n
     P = P[keep]
     if len(P) < 2:
         return np.hypot(Q[:, 0] - P[0, 0], Q[:, 1] - P[0, 1])
+    from scipy.spatial import cKDTree  # lazy: 0.3 s of import every command would pay
+
     _, nearest = cKDTree(P).query(Q)
     best = np.full(len(Q), np.inf)
     signed = np.zeros(len(Q))
@@ -86,6 +87,8 @@ def path_contour_error(commanded: np.ndarray, actual: np.ndarray, *, arcs: list[
     Pk = P[idx]
     if len(Pk) < 2:
         return np.linalg.norm(Q - Pk[0], axis=1)
+    from scipy.spatial import cKDTree  # lazy, as above
+
     if t is None:
         _, nearest = cKDTree(Pk).query(Q)
     else:
