@@ -27,12 +27,13 @@ class DiagnosisConfig:
     #: data at least as well; one that fits them worse sits in another valley of the base
     #: parameters and its held-out gain is that valley's, not the effect's.
     nested_training: bool = True
-    #: The held-out residuals are coloured: both are whitened by the prediction-error filter
-    #: of an AR model of the augmented model's residual, order ≤ this (least BIC), before
-    #: the likelihood ratio.  10 samples span the loop's fast dynamics at 1 kHz; on the
-    #: one case looked at BIC chose the same order with 30 allowed.  0: the older rule,
-    #: n = N/τ effective samples with τ the residual's correlation time (weaker: it counts
-    #: a sharp effect, a gap at reversals, as if it were as slow as the base's residual).
+    #: The held-out residuals are coloured; besides the slow noise model (N/τ effective
+    #: samples, τ the residual's correlation time: it counts a sharp effect, a gap's steps
+    #: at reversals, as if it were as slow as the base's residual) the likelihood ratio is
+    #: also taken on both residuals whitened by the prediction-error filter of an AR model
+    #: of the augmented model's residual, order ≤ this (least BIC).  10 samples span the
+    #: loop's fast dynamics at 1 kHz; on the one case looked at BIC chose the same order
+    #: with 30 allowed.  0: the slow noise model alone (the rule until stop 31).
     ar_order_max: int = 10
     #: Of the effects that pass, the first named is the one removing the largest share of
     #: the held-out residual: the evidence says an effect is real, its size which matters

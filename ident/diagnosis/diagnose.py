@@ -16,12 +16,12 @@
    two-fold cross-validation over the halves of every segment — against the base model
    re-fitted by the same procedure, so re-fitting alone earns nothing;
 4. **accepts** an effect by one statistical rule (:func:`evidence`): the held-out
-   likelihood ratio, the residuals whitened by an AR noise model, exceeds the χ²
-   quantile of the parameters it adds (``config.alpha``), it removes at least ``config.min_relevant`` of
-   the held-out residual, and its parameters are the physics its name means
-   (:func:`_plausible`: size bounds, no signature veto); of those that pass, the one removing
-   the largest share of the held-out residual wins; greedy forward selection then tries a second one on top by the
-   same rule;
+   likelihood ratio under a slow and a fast (AR-whitened) noise model exceeds the χ²
+   quantile of the parameters it adds (``config.alpha``), it removes at least
+   ``config.min_relevant`` of the held-out residual, and its parameters are the physics its
+   name means (:func:`_plausible`: size bounds, no signature veto); of those that pass, the
+   one removing the largest share of the held-out residual wins; greedy forward selection
+   then tries a second one on top by the same rule;
 5. **describes** the equivalent input disturbance (:mod:`ident.diagnosis.disturbance`) on
    the identification and validation recordings, and names an ``external_force`` when it
    comes in time blocks the motion does not explain;
