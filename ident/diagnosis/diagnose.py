@@ -319,18 +319,26 @@ def _gain(sc: _Scored, ref: _Scored) -> tuple[float, bool, float]:
     return g_raw, folds_raw, g_raw
 
 
+def _lag_products(r: np.ndarray) -> np.ndarray:
+    """``Σ_t r̃(t)·r̃(t+k)`` for lags k = 0 … N−1 of ``r̃ = r − mean(r)`` (by FFT, zero-padded
+    to 2N so no lag wraps around): N times the biased autocovariance."""
+    r = np.asarray(r, dtype=float) - float(np.mean(r))
+    f = np.fft.rfft(r, 2 * r.size)
+    return np.fft.irfft(f * np.conj(f))[: r.size]
+
+
 def correlation_time(r: np.ndarray) -> float:
     """Integrated autocorrelation time of ``r``, samples (Geyer's initial positive sequence).
 
     τ = −1 + 2·Σ_m (ρ(2m) + ρ(2m+1)), summed while the pair sums stay positive; a white
     residual has τ = 1, a residual that is a slow wave has τ of the order of its period.
     """
-    r = np.asarray(r, dtype=float) - float(np.mean(r))
-    n = r.size
-    if n < 4 or not np.any(r):
+    n = np.size(r)
+    if n < 4:
         return 1.0
-    f = np.fft.rfft(r, 2 * n)
-    acf = np.fft.irfft(f * np.conj(f))[:n]
+    acf = _lag_products(r)
+    if acf[0] <= 0.0:  # r constant
+        return 1.0
     acf = acf / acf[0]
     tau = -1.0
     for m in range(0, n // 2 - 1):
@@ -350,12 +358,12 @@ def ar_whitener(r: np.ndarray, max_order: int) -> np.ndarray:
     """
     from scipy.linalg import solve_toeplitz
 
-    r = np.asarray(r, dtype=float) - float(np.mean(r))
-    n = r.size
-    if n < 4 * max_order or not np.any(r):
+    n = np.size(r)
+    if n < 4 * max_order:
         return np.ones(1)
-    f = np.fft.rfft(r, 2 * n)
-    acf = np.fft.irfft(f * np.conj(f))[: max_order + 1] / n
+    acf = _lag_products(r)[: max_order + 1] / n
+    if acf[0] <= 0.0:  # r constant
+        return np.ones(1)
     best, best_bic = np.ones(1), n * math.log(max(acf[0], 1e-300))
     for p in range(1, max_order + 1):
         try:
