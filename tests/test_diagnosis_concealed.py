@@ -24,11 +24,13 @@ CASES = json.loads((FIX / "cases.json").read_text()) if (FIX / "cases.json").exi
 
 # Classes the current augmented models do not yet recover on the virtual CNC (see
 # docs/diagnosis.md, "Known misses"); kept as strict xfails so a fix shows up at once.
-# Backlash and resonance since the one general search replaced the restarts tuned to
-# single seeds (velocity-gain restarts, every-start backlash fits, the preference for a
-# mode at the spectrum peak): the gap is found at 0.037 of 0.05 mm and falls short of the
-# χ² threshold (LR 9.3 / 11.0); the mode is fitted at 300 Hz instead of 100 Hz.
-KNOWN_MISSES: set[str] = {"backlash", "resonance"}
+# Resonance since the one general search replaced the restarts tuned to single seeds
+# (velocity-gain restarts, every-start backlash fits, the preference for a mode at the
+# spectrum peak): the mode is fitted at 300 Hz instead of 100 Hz.  Backlash was a known miss
+# for the same reason until stop 32 (stop 31: gap fitted at 0.0017 mm, time_delay named);
+# since the rounding-level changes of stop 32 the gap is fitted at 0.027 of 0.05 mm
+# (motor share 0.98, at its bound) and named: a fragile fit that the last digits move.
+KNOWN_MISSES: set[str] = {"resonance"}
 
 
 def load(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
