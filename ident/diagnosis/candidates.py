@@ -83,6 +83,13 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     a1 = abs(th0[0]) or 1.0
     floors = np.array([1.0, 1.0, 1.0, 0.05, 0.01 * a1, 0.01 * a2, 1e-4 * a2, 1e-4 * a2])
     s_th = np.maximum(np.abs(th0), floors)
+    # β = b2 − a2 in place of b2 (cfg.fit_beta): b2 and a2 multiply positions of ~100 mm
+    # and nearly cancel, so a step on b2 alone moves u by far more than one on a2
+    beta = fit_base and cfg.fit_beta
+    if beta:
+        th0 = th0.copy()
+        th0[5] -= th0[1]
+        s_th[5] = max(abs(th0[5]), 1e-4 * a2)
     ep0 = spec.ep.astype(float)
     s_ep = []
     lo, hi = [], []
@@ -122,6 +129,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         th = th0.copy()
         if nb:
             th[:] = z[:8] * s_th
+            if beta:
+                th[5] += th[1]
         ep = ep0.copy()
         if idx:
             ep[idx] = z[nb:] * s_ep
