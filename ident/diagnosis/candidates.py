@@ -263,7 +263,7 @@ def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) 
             near = min(fits, key=lambda q: abs(q - r))  # warm start from the nearest profile point
             s0 = fits[near][1].copy()
             s0.ep[k] = r * d_hat
-            s1 = (fit_spec(s0, chunk, fit_effects=False, max_iter=iters, secant_nfev=cfg.delay_profile_evals)
+            s1 = (fit_spec(s0, chunk, fit_effects=False, max_iter=iters, secant_nfev=cfg.delay_profile_evals, cfg=cfg)
                   if np.isfinite(sse(s0, chunk)) else s0)
             fits[r] = (sse(s1, chunk), s1)
         return fits[r][0] <= (1.0 + tol) * min(v for v, _ in fits.values())
@@ -346,7 +346,8 @@ def delayed_regression_start(chunk: Chunk, m: int, reg: Regression | None = None
     return ModelSpec(np.array([alpha_1, 1.0, alpha_i, beta_2, beta_1, beta_0, d_plus, d_minus]) * a2)
 
 
-def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool = False) -> ModelSpec:
+def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool = False,
+                 cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
     """``spec`` on the sampled controller (u computed every Ts and held), base re-fitted.
 
     ``causal``: the feed-forward takes the command's derivatives by backward differences,
@@ -358,11 +359,11 @@ def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool
     s = softened_base(spec, chunk.Ts) or spec.copy()
     s.modes[4] = 2 if causal else 1
     # twice, as the base itself: the restart re-scales the parameters after the first long move
-    return fit_spec(fit_spec(s, chunk, fit_effects=False, max_iter=max_iter), chunk, fit_effects=False,
-                    max_iter=max_iter)
+    return fit_spec(fit_spec(s, chunk, fit_effects=False, max_iter=max_iter, cfg=cfg), chunk, fit_effects=False,
+                    max_iter=max_iter, cfg=cfg)
 
 
-def base_variants(spec: ModelSpec, chunk: Chunk, pool=None) -> list[ModelSpec]:
+def base_variants(spec: ModelSpec, chunk: Chunk, pool=None, cfg: DiagnosisConfig = DEFAULT) -> list[ModelSpec]:
     """The base model on every control law of :data:`~ident.diagnosis.augmented.CONTROLLERS`,
     best training fit first.
 
@@ -373,7 +374,8 @@ def base_variants(spec: ModelSpec, chunk: Chunk, pool=None) -> list[ModelSpec]:
     sample on every move that a dead time or a mode would otherwise take up.  ``pool``
     (an executor) fits the two sampled forms side by side.
     """
-    fitted = (pool.map if pool is not None else map)(lambda c: sampled_base(spec, chunk, causal=c), (False, True))
+    fitted = (pool.map if pool is not None else map)(lambda c: sampled_base(spec, chunk, causal=c, cfg=cfg),
+                                                     (False, True))
     return sorted([spec, *fitted], key=lambda s: sse(s, chunk))
 
 

@@ -241,7 +241,7 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, pool: Th
     def refit(i: int, s0: ModelSpec):
         s0 = s0.copy()
         s0.effects = tuple(e for e in s0.effects if e in keep)
-        return fit_spec(s0, folds[i][0], max_iter=cfg.reference_iter)
+        return fit_spec(s0, folds[i][0], max_iter=cfg.reference_iter, cfg=cfg)
 
     jobs = [(i, pool.submit(refit, i, sc.specs[i])) for sc in scs[1:] for i in range(len(folds))]
     best = list(ref.specs)
@@ -259,7 +259,8 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, pool: Th
     return ref if all(b is r for b, r in zip(best, ref.specs)) else scored(best)
 
 
-def fit_base(spec: ModelSpec, chunk: Chunk, pool: ThreadPoolExecutor | None = None) -> ModelSpec:
+def fit_base(spec: ModelSpec, chunk: Chunk, pool: ThreadPoolExecutor | None = None,
+             cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
     """The base model of eq. 3.3 re-fitted in free run on ``chunk``, from two starts.
 
     From the given parameters and from :func:`softened_base` (the two faster poles moved
@@ -274,7 +275,7 @@ def fit_base(spec: ModelSpec, chunk: Chunk, pool: ThreadPoolExecutor | None = No
         starts.append(soft)
 
     def fit(s: ModelSpec) -> ModelSpec:
-        return fit_spec(fit_spec(s, chunk, max_iter=30), chunk, max_iter=30)
+        return fit_spec(fit_spec(s, chunk, max_iter=30, cfg=cfg), chunk, max_iter=30, cfg=cfg)
 
     fits = list(pool.map(fit, starts)) if pool is not None else [fit(s) for s in starts]
     return min(fits, key=lambda f: sse(f, chunk))
@@ -616,13 +617,13 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     say("re-fitting the base model in free run")
     # 1. compare: the base model re-fitted in free run on all identification data
     # (twice: the restart re-scales the parameters after a long first move)
-    base = fit_base(ModelSpec(theta), full, pool)
+    base = fit_base(ModelSpec(theta), full, pool, cfg)
     # the base model is eq. 3.3 with a continuous control law or the same law sampled and
     # held (a digital drive), its feed-forward taking the command's derivatives as an
     # interpolator hands them over or causally, as the drive receives the commands:
     # whichever fits the identification recording best in free run is the base of every
     # candidate, the next best a second start of each search
-    base, other = base_variants(base, full, pool)[:2]
+    base, other = base_variants(base, full, pool, cfg)[:2]
     x_hat0 = simulate_spec(base, full)
     if against is not None:
         against = np.asarray(against, dtype=float).ravel()
@@ -677,7 +678,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     if validation is not None:  # the training data are all the data: base is fitted already
         base_sc = scored([base])
     else:
-        base_sc = scored(per_fold(lambda i, tr, te: fit_spec(fit_spec(base, tr, max_iter=30), tr, max_iter=30)))
+        base_sc = scored(per_fold(lambda i, tr, te: fit_spec(fit_spec(base, tr, max_iter=30, cfg=cfg), tr, max_iter=30, cfg=cfg)))
     # 3. each effect alone, on top of the base model
     candidates: list[Candidate] = []
     singles: dict[str, _Scored] = {}
@@ -807,7 +808,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     say("final fit")
     # 6. the final augmented model on all identification data, and the words
     if accepted:
-        final = fit_spec(current_sc.specs[0], full, max_iter=10)
+        final = fit_spec(current_sc.specs[0], full, max_iter=10, cfg=cfg)
     else:
         final = base
     x_hat1 = simulate_spec(final, full)
