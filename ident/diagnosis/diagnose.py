@@ -678,7 +678,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     if validation is not None:  # the training data are all the data: base is fitted already
         base_sc = scored([base])
     else:
-        base_sc = scored(per_fold(lambda i, tr, te: fit_spec(fit_spec(base, tr, max_iter=30, cfg=cfg), tr, max_iter=30, cfg=cfg)))
+        base_sc = scored(per_fold(lambda i, tr, te: fit_spec(fit_spec(base, tr, max_iter=30, cfg=cfg), tr,
+                                                             max_iter=30, cfg=cfg)))
     # 3. each effect alone, on top of the base model
     candidates: list[Candidate] = []
     singles: dict[str, _Scored] = {}
