@@ -156,6 +156,12 @@ def _g(v: float) -> str:
     return "n/a" if v is None or not math.isfinite(v) else f"{v:.6g}"
 
 
+def _fit_cell(v: float) -> str:
+    """A held-out fit %: a model whose free run diverged has a residual many times the signal
+    (fits like −1e89 %), which says less than the word."""
+    return "diverged" if v is not None and math.isfinite(v) and v < -1000.0 else _g(v)
+
+
 def _param_text(v) -> str:
     """A candidate parameter: a number, a range of numbers ("lo–hi") or a word."""
     if isinstance(v, (int, float)) and not isinstance(v, bool):
@@ -199,7 +205,7 @@ def _axis_section(r: AxisResult) -> str:
             params = ", ".join(f"{k} = {_param_text(v)}" for k, v in c.get("parameters", {}).items())
             cand_rows.append(
                 f"<tr><td>{html.escape(str(c.get('effect')))}</td><td>{html.escape(params)}</td>"
-                f"<td>{_g(c.get('fit_before_pct'))}</td><td>{_g(c.get('fit_after_pct'))}</td>"
+                f"<td>{_fit_cell(c.get('fit_before_pct'))}</td><td>{_fit_cell(c.get('fit_after_pct'))}</td>"
                 f"<td>{'yes' if c.get('accepted') else 'no'}</td></tr>")
         if cand_rows:
             parts.append("<table><tr><th>effect</th><th>parameters</th><th>held-out fit before %</th>"

@@ -380,6 +380,15 @@ def test_a_delay_range_is_said_only_when_the_recording_leaves_it_open():
     assert _param_text(sharp["delay_range_s"]) == "0.001"
 
 
+def test_the_report_says_diverged_for_a_candidate_whose_free_run_exploded():
+    from ident.report import _fit_cell
+
+    assert _fit_cell(-9.6e89) == "diverged"
+    assert _fit_cell(-35.2) == "-35.2"
+    assert _fit_cell(99.5) == "99.5"
+    assert _fit_cell(float("nan")) == "n/a"
+
+
 def test_summary_words_show_a_change_that_rounds_away_at_one_decimal():
     from ident.diagnosis.diagnose import _fit_words, _rms_words
 

@@ -52,7 +52,7 @@ __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
              max_iter: int = 25, bounds: dict[str, tuple[float, float]] | None = None,
-             fd_step: float | None = None, polish: bool = True, secant_nfev: int = 0,
+             fd_step: float | None = None, polish: bool = True, secant_nfev: int = 0, search: bool = False,
              cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
     """Output-error fit (eq. 3.6 on the free-run simulation) of base and effect parameters.
 
@@ -64,7 +64,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     effect may fix its own for a parameter); a step coarser than ``cfg.fd_step`` is followed
     by a polish at the fine step (half the iterations) when ``polish``.  ``secant_nfev`` > 0:
     the secant Levenberg–Marquardt (:func:`ident.least_squares.secant_lm`) with that many
-    simulations instead, no polish.  Returns the fitted copy; a fit that fails to improve
+    simulations instead, no polish.  ``search``: a fit of an effect's search (the race and its
+    polish), for ``cfg.fit_beta``.  Returns the fitted copy; a fit that fails to improve
     returns ``spec``.
     """
     if fd_step is None:
@@ -85,7 +86,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     s_th = np.maximum(np.abs(th0), floors)
     # β = b2 − a2 in place of b2 (cfg.fit_beta): b2 and a2 multiply positions of ~100 mm
     # and nearly cancel, so a step on b2 alone moves u by far more than one on a2
-    beta = fit_base and cfg.fit_beta
+    beta = fit_base and (cfg.fit_beta == "all" or (cfg.fit_beta == "searches" and search))
     if beta:
         th0 = th0.copy()
         th0[5] -= th0[1]
@@ -223,7 +224,8 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
         else:
             part = chunk.part(frac)
         nfev = cfg.race_evals[r] if cfg.race_evals else 0
-        alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, secant_nfev=nfev, cfg=cfg)
+        alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, secant_nfev=nfev,
+                          search=True, cfg=cfg)
                  for s in alive]
         costs = [sse(s, part) for s in alive]
         if r == len(cfg.race_fidelity) - 1 or len(alive) == 1:
@@ -231,7 +233,8 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
         alive = [alive[i] for i in _best_per_variant(alive, costs, max(cfg.joint_starts, len(alive) // 2))]
     # 4. polish the winner on the whole chunk at the fine step
     best = alive[int(np.argmin(costs))]
-    best = fit_spec(best, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, cfg=cfg)
+    best = fit_spec(best, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, search=True,
+                    cfg=cfg)
     return EFFECT_MODELS[effect].finish(best, chunk, cfg)
 
 
