@@ -18,7 +18,8 @@
 4. **accepts** an effect by one statistical rule (:func:`evidence`): the held-out
    likelihood ratio under a slow and a fast (AR-whitened) noise model exceeds the χ²
    quantile of the parameters it adds (``config.alpha``), it removes at least
-   ``config.min_relevant`` of the held-out residual, and its parameters are the physics its
+   ``config.min_relevant`` of the held-out residual and more than the measurement noise
+   (:func:`_above_noise`), and its parameters are the physics its
    name means (:func:`_plausible`: size bounds, no signature veto); of those that pass, the
    one removing the largest share of the held-out residual wins; greedy forward selection
    then tries a second one on top by the same rule;
