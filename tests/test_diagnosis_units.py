@@ -380,6 +380,26 @@ def test_a_delay_range_is_said_only_when_the_recording_leaves_it_open():
     assert _param_text(sharp["delay_range_s"]) == "0.001"
 
 
+def test_an_effect_must_explain_more_than_the_measurement_noise():
+    from ident.diagnosis.config import DEFAULT
+    from ident.diagnosis.diagnose import _above_noise, _Scored
+
+    rng = np.random.default_rng(0)
+    noise = rng.normal(0.0, 0.4e-3, 20000)                       # 0.4 µm sensor scatter
+    periodic = 1.3e-3 * np.sin(np.linspace(0.0, 40.0 * np.pi, noise.size))
+
+    def scored(r: np.ndarray) -> _Scored:
+        return _Scored([], [r], [r], [0.0])
+
+    base = scored(noise + periodic)
+    # the residual is only ~2.5x the noise, yet the effect removes a systematic 0.9 µm rms
+    ok, why = _above_noise(scored(noise), base, 0.4e-3, DEFAULT)
+    assert ok and why == ""
+    # an effect that removes a sliver of it changes the prediction by less than the scatter
+    ok, why = _above_noise(scored(noise + 0.97 * periodic), base, 0.4e-3, DEFAULT)
+    assert not ok and "within the measurement noise" in why
+
+
 def test_the_report_says_diverged_for_a_candidate_whose_free_run_exploded():
     from ident.report import _fit_cell
 
@@ -714,3 +734,11 @@ def test_the_base_model_takes_the_control_law_the_drive_uses(x_r):
     assert [int(v.modes[4]) for v in sorted(variants, key=lambda v: v.modes[4])] == [0, 1, 2]
     assert variants[0].modes[4] == 2
     assert sse(variants[0], chunk) < 0.5 * sse(variants[1], chunk)
+
+
+def test_the_position_gains_parametrisation_is_one_of_three_named_settings():
+    from ident.diagnosis.config import DEFAULT, DiagnosisConfig
+
+    assert DEFAULT.fit_beta == "all"
+    with pytest.raises(ValueError, match="fit_beta"):
+        DiagnosisConfig(fit_beta=True)
