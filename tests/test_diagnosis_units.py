@@ -359,12 +359,19 @@ def test_a_parameter_with_a_range_is_held_by_later_fits(x_r):
 
 
 def test_the_motor_share_of_the_position_term_follows_from_the_controller_structure():
-    from ident.diagnosis.candidates import cascade_motor_share
+    from ident.diagnosis.effects import cascade_motor_share, motor_shares
 
-    # P-PI cascade of Table 3.3: a2 = K(Kd·Kp + Ki), b2 = K·Kp·Kd, ψ = Ki/(Kd·Kp + Ki) = 50.9/62.0
-    assert cascade_motor_share(THETA) == pytest.approx(1.0 - 11106.33 / 62009.83)
-    # PID of Table 3.4 on the scale: b2 = a2
-    assert cascade_motor_share(np.array([192.65, 44356.0, 316830.0, 0.0, 190.1, 44356.0, 441.0, -302.0])) == 0.0
+    # P-PI cascade of Table 3.3, no feed-forward: ψ = Ki/(Kd·Kp + Ki) = 1 − b2/a2 (b2 = K·Kp·Kd)
+    assert cascade_motor_share(THETA) == pytest.approx(1.0 - 11106.33 / 62009.83, rel=0.005)
+    assert motor_shares(THETA) == (pytest.approx(1.0 - 11106.33 / 62009.83),)
+    # a cascade Kv 300, Kp 30, Ki 15 000 (per unit mass) with velocity feed-forward 0.9:
+    # Ki·kvff·x_r joins b2, so 1 − b2/a2 is no longer ψ = Ki/a2 = 0.625; the roots still are
+    kv, kp, ki, kvff = 300.0, 30.0, 15000.0, 0.9
+    theta_ff = np.array([kv, kv * kp + ki, ki * kp, 0.0, kv * kvff, kv * kp + ki * kvff, 0.0, 0.0])
+    assert cascade_motor_share(theta_ff) == pytest.approx(0.625)
+    assert motor_shares(theta_ff) == (pytest.approx(0.0625), pytest.approx(0.625))
+    # PID of Table 3.4 on the scale: b2 = a2, ψ = 0 is the first reading
+    assert motor_shares(np.array([192.65, 44356.0, 316830.0, 0.0, 190.1, 44356.0, 441.0, -302.0]))[0] == 0.0
     assert cascade_motor_share(np.array([1.0, -5.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0])) == 0.0
 
 

@@ -27,19 +27,38 @@ from ident.diagnosis.augmented import MODE_SLOTS, simulate_augmented
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.spec import Chunk, ModelSpec, sse
 
-__all__ = ["Effect", "TimeDelay", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share"]
+__all__ = ["Effect", "TimeDelay", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share", "motor_shares"]
 
 
 def cascade_motor_share(theta: np.ndarray) -> float:
-    """ψ, the share of the position feedback that reads the motor, implied by θ of eq. 3.3.
+    """ψ, the share of the position feedback that reads the motor, of a P-PI cascade with θ of eq. 3.3.
 
-    A P-PI cascade (position gain Kp, velocity loop Kv + Ki/s on the motor) gives
-    ``u = Kv·Kp·(x_r − x_table) + Ki·Kp·∫(x_r − x_table) − Kv·ẋ − Ki·x_motor``: the position
-    term a2 = Kv·Kp + Ki reads the table with the command's gain b2 = Kv·Kp (θ[5]) and the
-    motor with the rest, ψ = 1 − b2/a2 (Table 3.3: 0.82).  A PID on the scale has b2 = a2, ψ = 0.
+    A P-PI cascade (position gain Kp, velocity loop Kv + Ki/s on the motor, velocity
+    feed-forward kvff) gives ``u = Kv·Kp·(x_r − x_table) + Ki·Kp·∫(x_r − x_table) − Kv·ẋ
+    − Ki·x_motor + (Kv·kvff·ẋ_r + Ki·kvff·x_r)``, per unit mass: a1 = Kv, a2 = Kv·Kp + Ki,
+    a3 = Ki·Kp, so Kp is a root of ``a1·Kp² − a2·Kp + a3 = 0`` — the smaller one: the
+    position gain lies below the velocity loop's PI corner Ki/Kv, the other root — and
+    ψ = Ki/a2 = 1 − a1·Kp/a2 (Table 3.3: 0.819).  The feed-forward does not enter.
+    """
+    a1, a2, a3 = float(theta[0]), float(theta[1]), float(theta[2])
+    if not (a1 > 0.0 and a2 > 0.0 and a3 > 0.0):
+        return 0.0
+    kp = (a2 - math.sqrt(max(a2 * a2 - 4.0 * a1 * a3, 0.0))) / (2.0 * a1)
+    return float(np.clip(1.0 - a1 * kp / a2, 0.0, 1.0))
+
+
+def motor_shares(theta: np.ndarray) -> tuple[float, ...]:
+    """The readings of ψ (see :func:`cascade_motor_share`) the base's θ allows, to start fits from.
+
+    The rigid model cannot tell a P-PI cascade from a PID: 1 − b2/a2 is ψ of a cascade
+    without velocity feed-forward (Ki·kvff·x_r adds to b2) and 0 for a PID on the scale
+    (b2 = a2), whose θ reads as a cascade all the same.  Both readings, the second left
+    out when within 0.05 of the first.
     """
     a2, b2 = float(theta[1]), float(theta[5])
-    return float(np.clip(1.0 - b2 / a2, 0.0, 1.0)) if a2 > 0.0 else 0.0
+    plain = float(np.clip(1.0 - b2 / a2, 0.0, 1.0)) if a2 > 0.0 else 0.0
+    cascade = cascade_motor_share(theta)
+    return (plain,) if abs(cascade - plain) < 0.05 else (plain, cascade)
 
 
 def _vmax(chunk: Chunk) -> float:
@@ -127,13 +146,13 @@ class Backlash(Effect):
         return (0.0, 1.0) if name == "gap_mm" else super().bounds(name, p0, chunk, cfg)
 
     def starts(self, base, chunk, evidence, cfg):
-        psi = cascade_motor_share(base.theta)
+        shares = motor_shares(base.theta)
         out = []
         for g in self.start_gaps_mm:
             out.append(base.with_effect(self.name, {"gap_mm": g}, 0))
             # two masses: the loop on the table, its position term reading the motor in part
             # (share ψ); or semi-closed with the table's inertia, every loop term on the motor
-            for mode, share, reads_motor in ((1, psi, psi), (2, 0.0, 1.0)):
+            for mode, share, reads_motor in [(1, p, p) for p in shares] + [(2, 0.0, 1.0)]:
                 s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8,
                                                  "position_motor_share": share}, mode)
                 # with the motor leading the table by half the gap in steady motion, a loop
@@ -243,7 +262,7 @@ class Resonance(Effect):
         for f in np.geomspace(10.0, 0.3 / Ts, cfg.mode_grid_points):
             if all(abs(math.log(f / c)) > 0.2 for c in fs):
                 fs.append(float(f))
-        psi = cascade_motor_share(base.theta)
+        shares = dict.fromkeys((0.0,) + motor_shares(base.theta))
         out = []
         for f in fs:
             # a mode started at a residual spectrum peak stays near it (a two-mass mode shows
@@ -251,7 +270,7 @@ class Resonance(Effect):
             box = {"freq_hz": (cfg.peak_band[0] * f, cfg.peak_band[1] * f)} if f in peaks else {}
             zeta = 0.02 if f in peaks else 0.05
             variants = [({"gain": 1.0}, 0)] + [({"motor_fraction": 0.8, "position_motor_share": p}, 1)
-                                               for p in dict.fromkeys((0.0, psi))]
+                                               for p in shares]
             variants.append(({"motor_fraction": 0.8, "position_motor_share": 0.0}, 2))
             for extra, mode in variants:
                 s = base.with_effect(self.name, {"freq_hz": f, "damping": zeta, **extra}, mode)
@@ -462,7 +481,7 @@ class Saturation(Effect):
         au = np.abs(u[np.isfinite(u)])
         # ψ: the share of the position term that is the integral of the motor velocity —
         # 0 for a PID, about 0.8 for a P-PI cascade (it stops or runs on with the integral)
-        psis = dict.fromkeys((0.0, cascade_motor_share(base.theta)))
+        psis = dict.fromkeys((0.0,) + motor_shares(base.theta))
         return [base.with_effect(self.name, {"limit": float(np.percentile(au, q)), "position_motor_share": psi}, w)
                 for q in (99.9, 99.0, 96.0) for psi in psis for w in (0, 1)]
 
