@@ -46,7 +46,7 @@ if TYPE_CHECKING:
     from ident.regression import Regression
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
-           "sampled_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
+           "sampled_base", "refit_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
            "chunk_regression", "delayed_regression_start", "centre_delay"]
 
 
@@ -361,8 +361,13 @@ def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool
     """
     s = softened_base(spec, chunk.Ts) or spec.copy()
     s.modes[4] = 2 if causal else 1
-    # twice, as the base itself: the restart re-scales the parameters after the first long move
-    return fit_spec(fit_spec(s, chunk, fit_effects=False, max_iter=max_iter, cfg=cfg), chunk, fit_effects=False,
+    return refit_base(s, chunk, max_iter, cfg)
+
+
+def refit_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+    """The base parameters of ``spec`` re-fitted in free run on ``chunk``, twice: the restart
+    re-scales the parameters after the first long move.  Effect parameters are held."""
+    return fit_spec(fit_spec(spec, chunk, fit_effects=False, max_iter=max_iter, cfg=cfg), chunk, fit_effects=False,
                     max_iter=max_iter, cfg=cfg)
 
 

@@ -42,7 +42,7 @@ from scipy.signal import lfilter
 
 from core.errors import InputError
 from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, segment_starts
-from ident.diagnosis.candidates import base_variants, fit_spec, search, softened_base
+from ident.diagnosis.candidates import base_variants, fit_spec, refit_base, search, softened_base
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, TimeDelay, effect_parameters
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
@@ -276,7 +276,7 @@ def fit_base(spec: ModelSpec, chunk: Chunk, pool: ThreadPoolExecutor | None = No
         starts.append(soft)
 
     def fit(s: ModelSpec) -> ModelSpec:
-        return fit_spec(fit_spec(s, chunk, max_iter=30, cfg=cfg), chunk, max_iter=30, cfg=cfg)
+        return refit_base(s, chunk, cfg=cfg)
 
     fits = list(pool.map(fit, starts)) if pool is not None else [fit(s) for s in starts]
     return min(fits, key=lambda f: sse(f, chunk))
@@ -694,8 +694,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     if validation is not None:  # the training data are all the data: base is fitted already
         base_sc = scored([base])
     else:
-        base_sc = scored(per_fold(lambda i, tr, te: fit_spec(fit_spec(base, tr, max_iter=30, cfg=cfg), tr,
-                                                             max_iter=30, cfg=cfg)))
+        base_sc = scored(per_fold(lambda i, tr, te: refit_base(base, tr, cfg=cfg)))
     # 3. each effect alone, on top of the base model
     candidates: list[Candidate] = []
     singles: dict[str, _Scored] = {}
