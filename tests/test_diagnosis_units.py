@@ -110,7 +110,7 @@ def test_output_error_fit_recovers_a_perturbed_base_model(x_r):
     x = sim(x_r)
     chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
     start = ModelSpec(THETA * np.array([1.1, 0.9, 1.1, 1, 1, 0.95, 1.2, 0.8]))
-    fitted = fit_spec(fit_spec(start, chunk, max_iter=30), chunk, max_iter=30)
+    fitted = fit_spec(fit_spec(start, chunk, max_iter=30, cfg=DEFAULT), chunk, max_iter=30, cfg=DEFAULT)
     assert sse(fitted, chunk) < 1e-3 * sse(start, chunk)
 
 
@@ -315,7 +315,7 @@ def test_the_search_recovers_an_actuation_dead_time_on_the_sampled_controller(x_
     chunk = _actuation_delay_recording(x_r, 0.0013)
     start = ModelSpec(THETA.copy())
     start.modes[4] = 1
-    fitted = search(start, "time_delay", chunk, {})
+    fitted = search(start, "time_delay", chunk, {}, DEFAULT)
     assert fitted.modes[1] == 1  # actuation, not capture
     assert fitted.ep[EP_INDEX["delay_s"]] == pytest.approx(0.0013, rel=0.1)
 
@@ -337,8 +337,8 @@ def test_a_weakly_determined_capture_delay_is_moved_to_the_middle_of_the_delays_
     low = ModelSpec(THETA.copy(), ("time_delay",))
     low.modes[4] = 1
     low.ep[EP_INDEX["delay_s"]] = 0.0018  # where a fit on the flat side of the profile stops
-    low = fit_spec(low, chunk, fit_effects=False)
-    centred = centre_delay(low, chunk)
+    low = fit_spec(low, chunk, fit_effects=False, cfg=DEFAULT)
+    centred = centre_delay(low, chunk, DEFAULT)
     p = effect_parameters(centred, "time_delay")
     lo, hi = p["delay_range_s"]
     assert lo < 0.003 < hi  # the truth fits as well as the start
@@ -353,9 +353,9 @@ def test_a_parameter_with_a_range_is_held_by_later_fits(x_r):
     spec.modes[4] = 1
     spec.ep[EP_INDEX["delay_s"]] = 0.002
     spec.ranges["delay_s"] = (0.0015, 0.0025)
-    assert fit_spec(spec, chunk, max_iter=5).ep[EP_INDEX["delay_s"]] == 0.002
+    assert fit_spec(spec, chunk, max_iter=5, cfg=DEFAULT).ep[EP_INDEX["delay_s"]] == 0.002
     spec.ranges.clear()
-    assert fit_spec(spec, chunk, max_iter=5).ep[EP_INDEX["delay_s"]] != 0.002
+    assert fit_spec(spec, chunk, max_iter=5, cfg=DEFAULT).ep[EP_INDEX["delay_s"]] != 0.002
 
 
 def test_the_motor_share_of_the_position_term_follows_from_the_controller_structure():
@@ -445,7 +445,7 @@ def test_a_mode_started_at_the_residual_spectrum_peak_is_found_there(x_r):
     # the closed-loop peak of a two-mass mode lies a little below its free-free frequency
     evidence = {"spectrum_peaks": [{"freq_hz": 4.0, "share_above_20_hz": 0.0},
                                    {"freq_hz": 110.0, "share_above_20_hz": 0.3}]}
-    fitted = search(base, "resonance", chunk, evidence)
+    fitted = search(base, "resonance", chunk, evidence, DEFAULT)
     assert fitted.ep[EP_INDEX["freq_hz"]] == pytest.approx(120.0, rel=0.05)
     assert sse(fitted, chunk) < 0.01 * sse(base, chunk)
 
@@ -463,7 +463,7 @@ def test_a_resonance_is_a_lightly_damped_mode_below_nyquist_by_definition():
                         (105.0, DEFAULT.max_mode_damping, False)):
         spec.ep[EP_INDEX["freq_hz"]] = f
         spec.ep[EP_INDEX["damping"]] = zeta
-        assert (res.implausible(spec, chunk) == "") is ok
+        assert (res.implausible(spec, chunk, DEFAULT) == "") is ok
     # and the fit cannot leave that definition: the damping's bound is the same figure
     assert res.bounds("damping", 0.05, chunk, DEFAULT)[1] == DEFAULT.max_mode_damping
 
@@ -476,7 +476,7 @@ def test_a_cyclic_error_shows_a_whole_period_within_the_travel_recorded():
     spec = ModelSpec(THETA.copy(), ("cyclic_error",))
     for period, ok in ((5.0, True), (15.0, True), (20.0, True), (25.0, False), (60.0, False)):
         spec.ep[EP_INDEX["period_mm"]] = period
-        assert (EFFECT_MODELS["cyclic_error"].implausible(spec, chunk) == "") is ok
+        assert (EFFECT_MODELS["cyclic_error"].implausible(spec, chunk, DEFAULT) == "") is ok
 
 
 def test_regression_with_the_delay_starts_near_the_true_gains(x_r):
@@ -520,7 +520,7 @@ def test_evidence_strength_charges_the_parameters_an_effect_adds():
     r0 = [rng.normal(size=4000)]
     r1 = [0.9 * r0[0]]
     ref, sc = _Scored([], r0, r0, [1.0]), _Scored([], r1, r1, [1.0])
-    one, three = evidence(sc, ref, 1), evidence(sc, ref, 3)
+    one, three = evidence(sc, ref, 1, DEFAULT), evidence(sc, ref, 3, DEFAULT)
     assert one["likelihood_ratio"] == pytest.approx(three["likelihood_ratio"])
     assert one["minus_log10_p"] > three["minus_log10_p"] > 0  # same gain, fewer parameters: stronger
 
@@ -535,8 +535,8 @@ def test_an_effect_that_fits_the_training_data_worse_than_its_reference_earns_no
     r0 = [rng.normal(size=4000)]
     r1 = [0.5 * r0[0]]  # held out: the residual halved, far beyond the χ² threshold
     ref = _Scored([], r0, r0, [1.0])
-    better = evidence(_Scored([], r1, r1, [0.9]), ref, 1)
-    worse = evidence(_Scored([], r1, r1, [1.1]), ref, 1)  # another valley of the base
+    better = evidence(_Scored([], r1, r1, [0.9]), ref, 1, DEFAULT)
+    worse = evidence(_Scored([], r1, r1, [1.1]), ref, 1, DEFAULT)  # another valley of the base
     assert better["significant"] and better["fits_training"]
     assert not worse["significant"] and not worse["fits_training"]
     assert evidence(_Scored([], r1, r1, [1.1]), ref, 1, replace(DEFAULT, nested_training=False))["significant"]
@@ -579,7 +579,7 @@ def test_a_sharp_effect_on_a_slow_residual_is_heard_once_the_residuals_are_white
         gap[i : i + 30] += rng.choice([-1.0, 1.0])
     gap *= 0.12 * np.linalg.norm(slow) / np.linalg.norm(gap)
     ref, sc = _Scored([], [slow + gap], [slow + gap], [1.0]), _Scored([], [slow], [slow], [1.0])
-    ev = evidence(sc, ref, 2)
+    ev = evidence(sc, ref, 2, DEFAULT)
     assert ev["significant"] and ev["statistic"].startswith("AR-whitened")
     # counted as N/τ samples of the slow residual the same gain is not significant
     assert not evidence(sc, ref, 2, replace(DEFAULT, ar_order_max=0))["significant"]
@@ -594,7 +594,7 @@ def test_a_slow_gain_is_heard_by_the_slow_noise_model():
     rest = _slow_residual(rng, 6000)
     part = np.sqrt(2.0) * np.std(rest) * np.sin(2.0 * np.pi * 0.5 * 1e-3 * np.arange(6000))
     r0, r1 = rest + part, rest + 0.2 * part
-    ev = evidence(_Scored([], [r1], [r1], [1.0]), _Scored([], [r0], [r0], [1.0]), 2)
+    ev = evidence(_Scored([], [r1], [r1], [1.0]), _Scored([], [r0], [r0], [1.0]), 2, DEFAULT)
     assert ev["significant"] and ev["statistic"].startswith("N/τ")
 
 
@@ -613,7 +613,7 @@ def test_fitting_k_parameters_to_a_slow_residual_alone_is_rarely_significant():
         X = np.column_stack([_slow_residual(rng, 3000) + 0.02 * rng.normal(size=3000) for _k in range(2)])
         w = lambda v: lfilter([1.0, -0.98], [1.0], v, axis=0)  # noqa: E731  (the residual's own whitener)
         r1 = r0 - X @ np.linalg.lstsq(w(X), w(r0), rcond=None)[0]
-        lr.append(evidence(_Scored([], [r1], [r1], [1.0]), _Scored([], [r0], [r0], [1.0]), 2)["likelihood_ratio"])
+        lr.append(evidence(_Scored([], [r1], [r1], [1.0]), _Scored([], [r0], [r0], [1.0]), 2, DEFAULT)["likelihood_ratio"])
     assert 0.5 < np.mean(lr) < 5.0  # χ²(2) has mean 2
     assert sum(v > 10.6 for v in lr) <= 1  # χ²(2)'s 99.5 % quantile (the rule's own threshold, at α/4, is higher)
 
@@ -654,7 +654,7 @@ def test_a_backlash_gap_started_off_by_half_moves_to_the_true_gap(x_r, start_gap
     start.ep[EP_INDEX["gap_mm"]] = start_gap_mm
     start.ep[EP_INDEX["motor_fraction"]] = 0.75
     start.modes[: modes.size] = modes
-    fitted = fit_spec(start, chunk)
+    fitted = fit_spec(start, chunk, cfg=DEFAULT)
     assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.06, rel=0.05)
     assert sse(fitted, chunk) < 0.01 * sse(start, chunk)
 
@@ -674,8 +674,8 @@ def test_the_search_finds_a_gap_the_base_model_has_absorbed(x_r):
     chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
     start = ModelSpec(THETA_PID.copy())
     start.modes[4] = 1
-    base = fit_base(start, chunk)
-    fitted = search(base, "backlash", chunk, {})
+    base = fit_base(start, chunk, cfg=DEFAULT)
+    fitted = search(base, "backlash", chunk, {}, DEFAULT)
     assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.25)
     assert sse(fitted, chunk) < 0.5 * sse(base, chunk)
 
@@ -737,7 +737,7 @@ def test_the_base_model_takes_the_control_law_the_drive_uses(x_r):
     x = simulate_augmented(x_r, x_r, Ts, THETA_FF, modes=np.array([0, 0, 0, 0, 2]))
     chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
     start = ModelSpec(THETA_FF * np.array([1.1, 0.9, 1.2, 1.0, 1.1, 0.9, 1.0, 1.0]))
-    variants = base_variants(start, chunk)
+    variants = base_variants(start, chunk, cfg=DEFAULT)
     assert [int(v.modes[4]) for v in sorted(variants, key=lambda v: v.modes[4])] == [0, 1, 2]
     assert variants[0].modes[4] == 2
     assert sse(variants[0], chunk) < 0.5 * sse(variants[1], chunk)

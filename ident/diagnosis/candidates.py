@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ident.diagnosis.augmented import EP_INDEX, simulate_augmented
-from ident.diagnosis.config import DEFAULT, DiagnosisConfig
+from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, cascade_motor_share, effect_parameters
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, sim_substeps, simulate_spec, sse
 from ident.least_squares import bounded_lm, secant_lm
@@ -53,7 +53,7 @@ __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
              max_iter: int = 25, bounds: dict[str, tuple[float, float]] | None = None,
              fd_step: float | None = None, polish: bool = True, secant_nfev: int = 0, search: bool = False,
-             cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+             cfg: DiagnosisConfig) -> ModelSpec:
     """Output-error fit (eq. 3.6 on the free-run simulation) of base and effect parameters.
 
     Starts from ``spec``; base parameters move jointly with the effects' parameters
@@ -194,7 +194,7 @@ def _best_per_variant(specs: list[ModelSpec], costs: list[float], k: int) -> lis
 
 
 def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
-           cfg: DiagnosisConfig = DEFAULT, others: tuple[ModelSpec, ...] = ()) -> ModelSpec:
+           cfg: DiagnosisConfig, others: tuple[ModelSpec, ...] = ()) -> ModelSpec:
     """``base`` plus ``effect``, fitted by output error on ``chunk`` (the module's four steps).
 
     ``evidence``: the localisation of :func:`ident.diagnosis.residuals.localise` (spectrum
@@ -238,7 +238,7 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     return EFFECT_MODELS[effect].finish(best, chunk, cfg)
 
 
-def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
     """``spec``'s dead time moved to the middle of the delays that fit equally well.
 
     A capture delay on a stiff loop (P-PI) is weakly determined: a shorter trial delay is
@@ -349,8 +349,8 @@ def delayed_regression_start(chunk: Chunk, m: int, reg: Regression | None = None
     return ModelSpec(np.array([alpha_1, 1.0, alpha_i, beta_2, beta_1, beta_0, d_plus, d_minus]) * a2)
 
 
-def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool = False,
-                 cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool = False, *,
+                 cfg: DiagnosisConfig) -> ModelSpec:
     """``spec`` on the sampled controller (u computed every Ts and held), base re-fitted.
 
     ``causal``: the feed-forward takes the command's derivatives by backward differences,
@@ -361,17 +361,17 @@ def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool
     """
     s = softened_base(spec, chunk.Ts) or spec.copy()
     s.modes[4] = 2 if causal else 1
-    return refit_base(s, chunk, max_iter, cfg)
+    return refit_base(s, chunk, max_iter, cfg=cfg)
 
 
-def refit_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+def refit_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, *, cfg: DiagnosisConfig) -> ModelSpec:
     """The base parameters of ``spec`` re-fitted in free run on ``chunk``, twice: the restart
     re-scales the parameters after the first long move.  Effect parameters are held."""
     return fit_spec(fit_spec(spec, chunk, fit_effects=False, max_iter=max_iter, cfg=cfg), chunk, fit_effects=False,
                     max_iter=max_iter, cfg=cfg)
 
 
-def base_variants(spec: ModelSpec, chunk: Chunk, pool=None, cfg: DiagnosisConfig = DEFAULT) -> list[ModelSpec]:
+def base_variants(spec: ModelSpec, chunk: Chunk, pool=None, *, cfg: DiagnosisConfig) -> list[ModelSpec]:
     """The base model on every control law of :data:`~ident.diagnosis.augmented.CONTROLLERS`,
     best training fit first.
 

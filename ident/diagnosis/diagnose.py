@@ -228,7 +228,7 @@ class _Scored:
 
 
 def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, pool: ThreadPoolExecutor, scored,
-                    cfg: DiagnosisConfig = DEFAULT) -> "_Scored":
+                    cfg: DiagnosisConfig) -> "_Scored":
     """The reference model (effects ``keep`` only) with the lowest training cost per fold.
 
     Candidates for the reference: the given one (``scs[0]``) and a re-fit of it started
@@ -260,8 +260,8 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, pool: Th
     return ref if all(b is r for b, r in zip(best, ref.specs)) else scored(best)
 
 
-def fit_base(spec: ModelSpec, chunk: Chunk, pool: ThreadPoolExecutor | None = None,
-             cfg: DiagnosisConfig = DEFAULT) -> ModelSpec:
+def fit_base(spec: ModelSpec, chunk: Chunk, pool: ThreadPoolExecutor | None = None, *,
+             cfg: DiagnosisConfig) -> ModelSpec:
     """The base model of eq. 3.3 re-fitted in free run on ``chunk``, from two starts.
 
     From the given parameters and from :func:`softened_base` (the two faster poles moved
@@ -417,7 +417,7 @@ def _minus_log10_sf(x: float, k: int) -> float:
     return -ls / math.log(10.0)
 
 
-def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAULT) -> dict:
+def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig) -> dict:
     """The acceptance criterion: held-out likelihood ratio against its χ² threshold.
 
     For Gaussian white residuals the log-likelihood ratio of two models is
@@ -485,14 +485,14 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig = DEFAU
             "fits_training": bool(nested)}
 
 
-def _earns(sc: "_Scored", ref: "_Scored", effect: str, cfg: DiagnosisConfig = DEFAULT) -> bool:
+def _earns(sc: "_Scored", ref: "_Scored", effect: str, cfg: DiagnosisConfig) -> bool:
     """Does ``effect`` in ``sc`` pass the acceptance rule against ``ref`` on held-out evidence
     alone (:func:`evidence` significant and ``cfg.min_relevant`` of the residual removed)?"""
     return (evidence(sc, ref, EFFECT_MODELS[effect].added, cfg)["significant"]
             and _gain(sc, ref)[0] >= cfg.min_relevant)
 
 
-def _plausible(eff: str, sc: "_Scored", chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) -> tuple[bool, str]:
+def _plausible(eff: str, sc: "_Scored", chunk: Chunk, cfg: DiagnosisConfig) -> tuple[bool, str]:
     """Is the fitted effect, in every fold, the physics its name means (:meth:`Effect.implausible
     <ident.diagnosis.effects.Effect.implausible>`: part of its definition, not a signature test)?"""
     for spec in sc.specs:
@@ -633,13 +633,13 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     say("re-fitting the base model in free run")
     # 1. compare: the base model re-fitted in free run on all identification data
     # (twice: the restart re-scales the parameters after a long first move)
-    base = fit_base(ModelSpec(theta), full, pool, cfg)
+    base = fit_base(ModelSpec(theta), full, pool, cfg=cfg)
     # the base model is eq. 3.3 with a continuous control law or the same law sampled and
     # held (a digital drive), its feed-forward taking the command's derivatives as an
     # interpolator hands them over or causally, as the drive receives the commands:
     # whichever fits the identification recording best in free run is the base of every
     # candidate, the next best a second start of each search
-    base, other = base_variants(base, full, pool, cfg)[:2]
+    base, other = base_variants(base, full, pool, cfg=cfg)[:2]
     x_hat0 = simulate_spec(base, full)
     if against is not None:
         against = np.asarray(against, dtype=float).ravel()
@@ -896,7 +896,7 @@ def _disturbance(spec: ModelSpec, chunk: Chunk) -> dict:
 
 
 def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance: dict,
-                    cfg: DiagnosisConfig = DEFAULT) -> Candidate | None:
+                    cfg: DiagnosisConfig) -> Candidate | None:
     """The ``external_force`` candidate when the disturbance comes in time blocks the motion does not explain.
 
     Looked for on the recording where the model fails on held-out data (the validation

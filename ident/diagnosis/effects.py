@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from ident.diagnosis.augmented import MODE_SLOTS, simulate_augmented
-from ident.diagnosis.config import DEFAULT, DiagnosisConfig
+from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.spec import Chunk, ModelSpec, sse
 
 __all__ = ["Effect", "TimeDelay", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share", "motor_shares"]
@@ -105,7 +105,7 @@ class Effect:
     def set_arrays(self, p: dict, ep: np.ndarray, modes: np.ndarray) -> None:
         raise NotImplementedError
 
-    def implausible(self, spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig = DEFAULT) -> str:
+    def implausible(self, spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> str:
         """Why the fitted ``spec`` is not the physics the name means on ``chunk`` ("" if it is)."""
         return ""
 
@@ -180,7 +180,7 @@ class Backlash(Effect):
             ep[11] = p.get("motor_fraction", 0.5)
             ep[12] = p.get("position_motor_share", 0.0)
 
-    def implausible(self, spec, chunk, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg):
         g = float(spec.ep[0])
         return f"gap below {1e3 * cfg.min_gap_mm:.0f} µm" if g < cfg.min_gap_mm else ""
 
@@ -215,7 +215,7 @@ class Stribeck(Effect):
     def set_arrays(self, p, ep, modes):
         ep[1], ep[2] = p["static_to_coulomb_ratio"], p["stribeck_velocity_mm_s"]
 
-    def implausible(self, spec, chunk, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg):
         r = float(spec.ep[1])
         return (f"breakaway within {100 * (cfg.min_static_ratio - 1):.0f} % of Coulomb friction"
                 if r < cfg.min_static_ratio else "")
@@ -295,7 +295,7 @@ class Resonance(Effect):
         else:
             ep[5] = p.get("gain", 1.0)
 
-    def implausible(self, spec, chunk, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg):
         f, z = float(spec.ep[3]), float(spec.ep[4])
         # ζ on its bound: the fit wanted a better-damped pole pair (a filter), not a mode
         if z >= (1.0 - 1e-3) * cfg.max_mode_damping or f > 0.45 / chunk.Ts:
@@ -380,7 +380,7 @@ class TimeDelay(Effect):
         recording sampled every Ts cannot tell it from a drive's dead time."""
         return float(spec.ep[6]) <= Ts
 
-    def implausible(self, spec, chunk, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg):
         return "delay within one sample period, the lag of sampling" if self.within_inherent_lag(spec, chunk.Ts) else ""
 
     def words(self, p):
@@ -446,7 +446,7 @@ class CyclicError(Effect):
         ep[8], ep[9] = p["amplitude"] * math.cos(phase), p["amplitude"] * math.sin(phase)
         modes[2] = 1 if p.get("kind") == "disturbance" else 0
 
-    def implausible(self, spec, chunk, cfg=DEFAULT):
+    def implausible(self, spec, chunk, cfg):
         # an error is periodic only where a whole period is seen (cfg.min_periods over the travel)
         period, travel = float(spec.ep[7]), float(np.ptp(chunk.x))
         if period * cfg.min_periods > travel:
