@@ -7,8 +7,9 @@ bounds and scales (:mod:`ident.diagnosis.effects`):
    main nonlinear parameter (gap, breakaway ratio, frequency, delay, period, limit), led by
    the localisation where it can be (residual spectrum peaks, position periodogram, |u|
    percentiles, the regression that knows a delay), times every structural variant;
-2. **screen** — each start's free-run cost with the base held; the best of every
-   structural variant and the cheapest others up to ``config.screened_starts`` go on;
+2. **screen** — each start's free-run cost with the base held, on the ``race_seconds`` of
+   windows the race ends on; the best of every structural variant and the cheapest
+   others up to ``config.screened_starts`` go on;
 3. **race** (successive halving over the share of the recording fitted) — every start
    still in the race gets a few iterations of the joint fit of base and effect (bounded
    Levenberg–Marquardt with the coarse difference step: contact, stick and clipping
@@ -207,17 +208,19 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     delays that fit equally well, :func:`centre_delay`).
     """
     starts = [s for b in (base,) + tuple(others) for s in EFFECT_MODELS[effect].starts(b, chunk, evidence, cfg)]
-    # 2. screen: free-run cost with the base held (diverging starts drop out)
-    costs = [sse(s, chunk) for s in starts]
+    # windows only where they cut the work at least in half: on a recording barely longer
+    # than race_seconds they cost what it costs and only add restarts (a 6.8 s LinuxCNC
+    # capture lost its 20 µm gap to them)
+    windowed = 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts
+    # 2. screen: free-run cost with the base held (diverging starts drop out), on what the
+    # race's last round sees
+    look = chunk.windows(cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s) if windowed else chunk
+    costs = [sse(s, look) for s in starts]
     alive = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
     if not alive:
         return base.with_effect(effect)
     # 3. race: joint fits on a growing share of race_seconds of the recording (of all of it
     # when 0), the worse half dropped after each round
-    # windows only where they cut the work at least in half: on a recording barely longer
-    # than race_seconds they cost what it costs and only add restarts (a 6.8 s LinuxCNC
-    # capture lost its 20 µm gap to them)
-    windowed = 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts
     for r, (frac, it) in enumerate(zip(cfg.race_fidelity, cfg.race_iter)):
         if windowed:  # windows spread over the whole recording, warm restarts
             part = chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
