@@ -492,6 +492,23 @@ def _earns(sc: "_Scored", ref: "_Scored", effect: str, cfg: DiagnosisConfig) -> 
             and _gain(sc, ref)[0] >= cfg.min_relevant)
 
 
+def _judge(eff: str, sc: "_Scored", ref: "_Scored", chunk: Chunk, noise: float,
+           cfg: DiagnosisConfig) -> tuple[bool, float, bool, dict, str]:
+    """Step 4's rule for ``eff`` in ``sc`` against ``ref``, the same for a first and a second effect.
+
+    Accepted when :func:`evidence` is significant, at least ``cfg.min_relevant`` of the
+    held-out residual is removed (:func:`_gain`), the fit is the physics its name means
+    (:func:`_plausible`) and it explains more than the noise (:func:`_above_noise`).
+    Returns (accepted, gain, improves every fold, evidence, why not plausible).
+    """
+    gain, folds_ok, _gw = _gain(sc, ref)
+    ev = evidence(sc, ref, EFFECT_MODELS[eff].added, cfg)
+    plaus, why = _plausible(eff, sc, chunk, cfg)
+    if plaus:
+        plaus, why = _above_noise(sc, ref, noise, cfg)
+    return bool(ev["significant"] and gain >= cfg.min_relevant and plaus), gain, folds_ok, ev, why
+
+
 def _plausible(eff: str, sc: "_Scored", chunk: Chunk, cfg: DiagnosisConfig) -> tuple[bool, str]:
     """Is the fitted effect, in every fold, the physics its name means (:meth:`Effect.implausible
     <ident.diagnosis.effects.Effect.implausible>`: part of its definition, not a signature test)?"""
@@ -740,12 +757,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     loc["held_out_rms_mm"] = base_sc.raw_rms
     for eff in effects:
         sc = singles[eff]
-        gain, folds_ok, _gw = _gain(sc, base_sc)
-        ev = evidence(sc, base_sc, EFFECT_MODELS[eff].added, cfg)
-        plaus, why = _plausible(eff, sc, full, cfg)
-        if plaus:
-            plaus, why = _above_noise(sc, base_sc, noise, cfg)
-        ok = ev["significant"] and gain >= cfg.min_relevant and plaus
+        ok, gain, folds_ok, ev, why = _judge(eff, sc, base_sc, full, noise, cfg)
         rank = gain if cfg.rank_by_gain else ev["minus_log10_p"]
         if ok and rank > best_gain:
             best_name, best_gain = eff, rank
@@ -781,12 +793,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
             current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, pool,
                                          scored, cfg)
         for eff, sc in pairs.items():
-            gain, folds_ok, _gw = _gain(sc, current_sc)
-            ev = evidence(sc, current_sc, EFFECT_MODELS[eff].added, cfg)
-            plaus, why = _plausible(eff, sc, full, cfg)
-            if plaus:
-                plaus, why = _above_noise(sc, current_sc, noise, cfg)
-            ok = ev["significant"] and gain >= cfg.min_relevant and plaus
+            ok, gain, folds_ok, ev, why = _judge(eff, sc, current_sc, full, noise, cfg)
             round2.append((eff, sc, gain, folds_ok, ok, why, ev))
             if ok and ev["minus_log10_p"] > best2_gain:
                 best2, best2_gain, best2_sc = eff, ev["minus_log10_p"], sc
