@@ -152,13 +152,19 @@ class Backlash(Effect):
             out.append(base.with_effect(self.name, {"gap_mm": g}, 0))
             # two masses: the loop on the table, its position term reading the motor in part
             # (share ψ); or semi-closed with the table's inertia, every loop term on the motor
-            for mode, share, reads_motor in [(1, p, p) for p in shares] + [(2, 0.0, 1.0)]:
-                s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8,
+            for mode, share, offset_share in [(1, p, p) for p in shares] + [(2, 0.0, 0.0)]:
+                s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8 if mode == 1 else 0.5,
                                                  "position_motor_share": share}, mode)
+                if mode == 2:
+                    m_ = 0.5 * (abs(s.theta[6]) + abs(s.theta[7]))
+                    s.theta[6], s.theta[7] = m_, -m_
                 # with the motor leading the table by half the gap in steady motion, a loop
-                # term reading the motor (share ψ) sees an offset a2·ψ·g/2 against the motion,
-                # which the base fitted without the gap took as Coulomb friction: given back
-                offset = s.theta[1] * reads_motor * 0.5 * g
+                # on the table whose position term reads the motor (share ψ) sees an offset
+                # a2·ψ·g/2 against the motion, which the base fitted without the gap took as
+                # Coulomb friction: given back.  Not in mode 2: a loop on the motor alone
+                # never sees the gap, only the recording does (with a2·g/2 given back a
+                # 0.6 mm gap started 8x dearer than without and was screened out, s1042.0)
+                offset = s.theta[1] * offset_share * 0.5 * g
                 s.theta[6] -= offset
                 s.theta[7] += offset
                 out.append(s)
