@@ -156,8 +156,12 @@ class Backlash(Effect):
                 s = base.with_effect(self.name, {"gap_mm": g, "motor_fraction": 0.8 if mode == 1 else 0.5,
                                                  "position_motor_share": share}, mode)
                 if mode == 2:
-                    m_ = 0.5 * (abs(s.theta[6]) + abs(s.theta[7]))
-                    s.theta[6], s.theta[7] = m_, -m_
+                    # how far the table coasts into the gap when the motor brakes is set by
+                    # the table's friction, which the base fitted without the gap made
+                    # lopsided: start it equal both ways at its mean (and the motor's share of
+                    # the inertia, unknown, at the middle of its range)
+                    d_mean = 0.5 * (abs(s.theta[6]) + abs(s.theta[7]))
+                    s.theta[6], s.theta[7] = d_mean, -d_mean
                 # with the motor leading the table by half the gap in steady motion, a loop
                 # on the table whose position term reads the motor (share ψ) sees an offset
                 # a2·ψ·g/2 against the motion, which the base fitted without the gap took as
