@@ -281,7 +281,7 @@ class Resonance(Effect):
             zeta = 0.02 if f in peaks else 0.05
             variants = [({"gain": 1.0}, 0)] + [({"motor_fraction": 0.8, "position_motor_share": p}, 1)
                                                for p in shares]
-            variants.append(({"motor_fraction": 0.8, "position_motor_share": 0.0}, 2))
+            variants.append(({"motor_fraction": 0.5, "position_motor_share": 0.0}, 2))
             for extra, mode in variants:
                 s = base.with_effect(self.name, {"freq_hz": f, "damping": zeta, **extra}, mode)
                 s.box.update(box)
