@@ -193,3 +193,17 @@ def test_a_large_semi_closed_gap_with_the_tables_inertia_is_named_and_sized():
     bl = next(c for c in d.candidates if c.effect == "backlash")
     assert bl.parameters["gap_mm"] == pytest.approx(0.599, rel=0.25)
     assert d.fit_after_pct > d.fit_before_pct + 3.0
+
+
+@pytest.mark.parametrize("seed, closure", [(1010, "full"), (1066, "full"), (1003, "semi")])
+def test_a_dead_time_drive_is_tuned_stable_not_held_by_its_force_limit(seed, closure):
+    """A P-PI drive with a dead time keeps its phase margin (ppi_bandwidth_for_margin):
+    its force stays well inside the amplifier's limit.  Version 1's f_v <= 0.2/tau left
+    these three (tuning seeds, first draw) in a limit cycle at the limit half the time."""
+    import gcode_gen
+    from benchmarks.independent_bench.simulate import command
+
+    case = draw_case("time_delay", seed, 0, closure, "ppi")
+    x_r, _seg = command(gcode_gen.generate(["X"], seed=case.id_seed))
+    sim = simulate(case.drive, x_r, seed=case.id_seed)
+    assert np.max(np.abs(sim.force)) < 0.5 * case.drive.controller.f_max
