@@ -28,7 +28,10 @@ History of the protocol (cases.py notes the ranges): the first report run (16 dr
 calibrated no saturation case and no full-closed P-PI resonance case; the saturation limit
 (now relative to the sustained force of the fastest moves) and the full-closed resonance
 tuning cap were revised on the tuning seeds, MAX_TRIES raised to 40, and the report seeds
-run again.
+run again.  At stop 35 the time_delay class's P-PI tuning rule was found to leave the
+drives unstable (in a limit cycle at the force limit half the time: not a dead time) and
+replaced by a 30° phase margin (version 2, cases.py); report figures before stop 35 are on
+version 1.
 
 Per case: truth, verdict, main parameter vs truth, base fit (identification),
 held-out fit before/after the diagnosis, wall time of ``ident.identify``.  Then accuracy
