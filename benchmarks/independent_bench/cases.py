@@ -35,7 +35,7 @@ Effect ranges (:data:`RANGES`):
   tuning seeds during the first report run.)
 - time_delay: ``tau`` lu(1, 8) ms (integer + fractional samples) at actuation or in the
   feedback (half each); the drive is tuned for it: P-PI ``f_v`` at most the bandwidth that
-  keeps a 45° phase margin with the dead time, the hold, the backward-difference velocity
+  keeps a 30° phase margin with the dead time, the hold, the backward-difference velocity
   and the velocity filter (:func:`ppi_bandwidth_for_margin`), PID ``3w <= 2 pi 0.2 / tau``.
   (Version 1 capped P-PI at ``f_v <= 0.2 / tau``, which leaves no margin once the hold,
   the velocity difference and the filter are counted: five of the six P-PI cases of the
@@ -66,7 +66,7 @@ import numpy as np
 from .controller import tune_pid, tune_ppi
 from .plant import PlantParams
 from .sensors import SensorParams
-from .simulate import Drive, record
+from .simulate import TS, Drive, record
 
 CLASSES = ["backlash", "stribeck", "resonance", "time_delay", "cyclic_error", "saturation", "none"]
 A_MAX = 2.0  # m/s², the programs' acceleration limit (gcode_gen a_max 2000 mm/s²)
@@ -85,10 +85,11 @@ RANGES = {
 }
 
 
-#: Phase margin (rad) a P-PI velocity loop is tuned to keep with its dead time (45°, the
-#: textbook figure servo drives are set up with).
+#: Phase margin (rad) a P-PI velocity loop is tuned to keep with its dead time: 30°, the
+#: low end of how drives are commissioned.  45°, the textbook figure, hid the dead time
+#: (held-out base fits 96-99.9 %: two of the tuning seeds' five P-PI cases never
+#: calibrated in 40 draws); chosen for the calibration window, not for a score.
 PHASE_MARGIN = math.pi / 6
-TS = 1e-3  # s, the servo sample of every drive (controller.ControllerParams.Ts)
 
 
 def ppi_bandwidth_for_margin(tau: float, f_vf: float, margin: float = PHASE_MARGIN, Ts: float = TS) -> float:
