@@ -31,7 +31,11 @@ tuning cap were revised on the tuning seeds, MAX_TRIES raised to 40, and the rep
 run again.  At stop 35 the time_delay class's P-PI tuning rule was found to leave the
 drives unstable (in a limit cycle at the force limit half the time: not a dead time) and
 replaced by a 30° phase margin (version 2, cases.py); report figures before stop 35 are on
-version 1.
+version 1.  At stop 36 MAX_TRIES went from 40 to 100: two report cases (s5033 saturation,
+s5059 time delay) had not calibrated in 40 draws, so the report set had 68 cases, not the
+70 the issue asks for; they land in the window at draws 42 and 65.  The calibration runs
+no diagnosis, and a case calibrated within 40 draws is the same case (the first sub-seed
+in the window), so no figure moves except by the two cases added.
 
 Per case: truth, verdict, main parameter vs truth, base fit (identification),
 held-out fit before/after the diagnosis, wall time of ``ident.identify``.  Then accuracy
@@ -72,7 +76,7 @@ from benchmarks.diagnosis_config_arg import CONFIG_HELP  # noqa: E402
 TUNING_SEEDS = range(1000, 1070)
 REPORT_SEEDS = range(5000, 5070)
 FIT_WINDOW = (60.0, 95.0)
-MAX_TRIES = 40
+MAX_TRIES = 100
 MAIN_PARAM = {"backlash": "gap_mm", "resonance": "freq_hz", "time_delay": "delay_s", "cyclic_error": "period_mm"}
 
 
