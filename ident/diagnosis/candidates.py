@@ -33,11 +33,12 @@ or a floor) so one difference step suits parameters as different as a3 ≈ 1e6 1
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ident.diagnosis.augmented import EP_INDEX, simulate_augmented
+from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS, simulate_augmented
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, cascade_motor_share, effect_parameters
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, sim_substeps, simulate_spec, sse
@@ -205,7 +206,8 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     the best start of every structural variant (:func:`_best_per_variant`).  Returns the
     model with the lowest weighted training cost found, after the effect's own
     :meth:`~ident.diagnosis.effects.Effect.finish` (a dead time moved to the middle of the
-    delays that fit equally well, :func:`centre_delay`).
+    delays that fit equally well, :func:`centre_delay`; a two-mass mode scanned along its
+    ridge of equal locked-motor frequency, :func:`scan_motor_fraction`).
     """
     starts = [s for b in (base,) + tuple(others) for s in EFFECT_MODELS[effect].starts(b, chunk, evidence, cfg)]
     # windows only where they cut the work at least in half: on a recording barely longer
@@ -300,6 +302,54 @@ def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSp
     out.ranges["delay_s"] = (lo * d_hat, hi * d_hat)
     return out
 
+
+def scan_motor_fraction(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
+    """``spec``'s two-mass mode moved along its ridge to the motor share that fits best.
+
+    With the velocity loop holding the motor, a recording shows the table ringing on the
+    spring at the locked-motor frequency f·√μ (f the free-free mode, μ the motor's share
+    of the inertia); f and μ trade along that curve, a narrow curved valley a local fit
+    creeps along and stops in wherever it entered it (independent bench, tuning seed
+    s1002.0: a 24 Hz mode fitted at 34 Hz from the start at μ = 0.8; scanned, 25 Hz).  The
+    identifiable quantity is f·√μ; the scan finds f where the data say where on the ridge
+    the drive lies, and moves nothing where they do not.  The scan: for every
+    μ of ``cfg.mode_share_grid`` not within 0.1 of the fitted one, f = f·√μ̂/√μ, the base
+    and the mode re-fitted with μ held for ``cfg.mode_scan_iter`` iterations on the race's
+    windows; the cheapest point there, polished on ``chunk`` with μ free, replaces
+    ``spec`` if it fits ``chunk`` better and is still a lightly damped mode when ``spec``
+    was one.
+    """
+    if "resonance" not in spec.effects or not spec.modes[MODE_SLOTS["resonance"]]:
+        return spec
+    i_f, i_mu = EP_INDEX["freq_hz"], EP_INDEX["motor_fraction"]
+    f_hat, mu_hat = float(spec.ep[i_f]), float(spec.ep[i_mu])
+    windowed = 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts
+    look = chunk.windows(cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s) if windowed else chunk
+    best, c_best = spec, sse(spec, look)
+    # a point where the fit leaves the definition of a mode (ζ on its bound) is not the
+    # mode moved along its ridge: the scan keeps the fit a resonance when it was one
+    plausible = not EFFECT_MODELS["resonance"].implausible(spec, chunk, cfg)
+
+    def meant(s: ModelSpec) -> bool:
+        return not (plausible and EFFECT_MODELS["resonance"].implausible(s, chunk, cfg))
+
+    for mu in cfg.mode_share_grid:
+        if abs(mu - mu_hat) < 0.1:
+            continue
+        s0 = spec.copy()
+        s0.ep[i_mu] = mu
+        s0.ep[i_f] = f_hat * math.sqrt(mu_hat / mu)
+        s0.box = {k: v for k, v in spec.box.items() if k != "freq_hz"}  # the ridge leaves a peak's band
+        s1 = fit_spec(s0, look, max_iter=cfg.mode_scan_iter, fd_step=cfg.fd_step_rough, polish=False,
+                      bounds={"motor_fraction": (0.999 * mu, 1.001 * mu)}, search=True, cfg=cfg)
+        c1 = sse(s1, look)
+        if c1 < c_best and meant(s1):
+            best, c_best = s1, c1
+    if best is spec:
+        return spec
+    best = fit_spec(best, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, search=True,
+                    cfg=cfg)
+    return best if sse(best, chunk) < sse(spec, chunk) and meant(best) else spec
 
 
 def chunk_regression(chunk: Chunk, shift: int = 0) -> Regression | None:

@@ -78,6 +78,12 @@ class DiagnosisConfig:
     #: two-mass mode shows between f·√μ and f in closed loop, so its free-free frequency
     #: lies at or above the peak.
     peak_band: tuple[float, float] = (0.9, 1.4)
+    #: A fitted two-mass mode is scanned along its ridge of equal locked-motor frequency
+    #: (candidates.scan_motor_fraction) at these motor shares, spread over the bound of
+    #: ``motor_fraction`` (0.2–0.98) …
+    mode_share_grid: tuple[float, ...] = (0.25, 0.4, 0.55, 0.7, 0.85)
+    #: … each point fitted for this many iterations on the race's windows.
+    mode_scan_iter: int = 8
 
     # -- search (candidates.search) ----------------------------------------------------
     #: Recordings longer than this (s) are scored on one hold-out fold instead of two and

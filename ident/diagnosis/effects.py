@@ -312,6 +312,11 @@ class Resonance(Effect):
             return f"not a lightly damped mode (ζ = {z:.2f}, {f:.0f} Hz)"
         return ""
 
+    def finish(self, spec, chunk, cfg):
+        from ident.diagnosis.candidates import scan_motor_fraction
+
+        return scan_motor_fraction(spec, chunk, cfg)
+
     def words(self, p):
         return f"resonance at {p['freq_hz']:.1f} Hz, damping {p['damping']:.3f}"
 
