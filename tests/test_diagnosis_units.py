@@ -374,6 +374,29 @@ def test_a_weakly_determined_capture_delay_is_moved_to_the_middle_of_the_delays_
     assert sse(centred, chunk) <= 1.02 * sse(low, chunk)
 
 
+@pytest.mark.parametrize("where, controller, lag", [(1, 0, 1e-3), (1, 1, 0.0), (1, 2, 0.0), (0, 0, 0.0)])
+def test_a_dead_time_is_told_without_the_lag_of_sampling_its_model_carries(where, controller, lag):
+    """Inside the loop of the continuous controller a fitted delay also takes up the hold
+    and the sampled velocity of the digital drive (one sample); the sampled controller
+    simulates them, and a capture delay lies outside the loop.  ``delay_s`` is the drive's
+    dead time; the model simulates ``delay_s + sampling_lag_s``."""
+    from ident.diagnosis.effects import TimeDelay, effect_parameters
+
+    spec = ModelSpec(THETA.copy()).with_effect("time_delay", {"delay_s": 0.0025}, where)
+    spec.modes[4] = controller
+    p = effect_parameters(spec, "time_delay", 1e-3)
+    assert p["delay_s"] == pytest.approx(0.0025 - lag)
+    assert p.get("sampling_lag_s", 0.0) == pytest.approx(lag)
+    assert TimeDelay().words(p).startswith(f"time delay {1e3 * (0.0025 - lag):.2f} ms")
+    ep, modes = np.zeros(N_EP), spec.modes.copy()
+    TimeDelay().set_arrays(p, ep, modes)
+    assert ep[EP_INDEX["delay_s"]] == pytest.approx(0.0025)  # read back, the model's own delay
+    assert effect_parameters(spec, "time_delay")["delay_s"] == 0.0025  # no sample period: the model's
+    # within the lag of sampling: a dead time of at most one sample beyond what the model carries
+    spec.ep[EP_INDEX["delay_s"]] = 0.0019
+    assert TimeDelay.within_inherent_lag(spec, 1e-3) == bool(lag)
+
+
 def test_a_parameter_with_a_range_is_held_by_later_fits(x_r):
     chunk = _capture_delay_recording(x_r, 0.003)
     spec = ModelSpec(THETA.copy(), ("time_delay",))

@@ -211,6 +211,24 @@ def test_a_two_mass_mode_is_sized_by_its_free_mode_not_where_the_fit_entered_its
     assert res.parameters["freq_hz"] == pytest.approx(24.2, rel=0.25)
 
 
+def test_a_dead_time_fitted_on_the_continuous_controller_is_told_without_the_lag_of_sampling():
+    """Diagnosis on this simulator, not ours: a semi-closed PID drive with a 1.4 ms dead time
+    on its feedback (tuning seed 1017, never a report seed).  The continuous controller
+    fits it best, with a delay of about 2.3 ms inside the loop: the dead time and the one
+    sample a digital loop's hold and sampled velocity add.  The dead time told must be the
+    drive's."""
+    import ident
+
+    case = draw_case("time_delay", 1017, 1, "semi", "pid")
+    rec, val = case_recordings(case)
+    d = ident.identify(rec, validate=val).axes["X"].diagnosis
+    assert d.verdict == "time_delay"
+    p = next(c for c in d.candidates if c.effect == "time_delay").parameters
+    assert p["delay_s"] == pytest.approx(case.truth["delay_s"], rel=0.25)
+    assert p["sampling_lag_s"] == pytest.approx(TS)  # the drive's 1 kHz servo cycle
+    assert f"time delay {1e3 * p['delay_s']:.2f} ms" in d.summary
+
+
 @pytest.mark.parametrize("seed, closure", [(1010, "full"), (1066, "full"), (1003, "semi")])
 def test_a_dead_time_drive_is_tuned_stable_not_held_by_its_force_limit(seed, closure):
     """A P-PI drive with a dead time keeps its phase margin (ppi_bandwidth_for_margin):

@@ -762,7 +762,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         if ok and rank > best_gain:
             best_name, best_gain = eff, rank
         candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
-                                     sigs, [], why, base_sc.raw_rms, ev))
+                                     sigs, [], why, base_sc.raw_rms, ev, Ts=Ts))
     # 4. greedy forward selection: the best single effect, then a second on top of it
     chosen_first = best_name  # by the forward step, whatever order the verdict names them in
     if best_name is not None:
@@ -799,7 +799,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
                 best2, best2_gain, best2_sc = eff, ev["minus_log10_p"], sc
         for eff, sc, gain, folds_ok, ok, why, ev in round2:
             candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
-                                         cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev))
+                                         cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev,
+                                         Ts=Ts))
         if best2 is not None:
             accepted.append(best2)
             current_sc = best2_sc
@@ -854,7 +855,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
             "validation_x_hat_after": simulate_spec(current_sc.specs[0], te),
         })
     aug = {"base": dict(zip(_BASE_KEYS, map(float, final.theta))),
-           "effects": {e: effect_parameters(final, e) for e in accepted},
+           "effects": {e: effect_parameters(final, e, Ts) for e in accepted},
            "controller": CONTROLLERS[int(final.modes[4])],
            "held_out": scheme}
     named = accepted + (["external_force"] if external is not None and external.accepted else [])
@@ -871,7 +872,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     mismatch["held_out"] = scheme
     # the external force is told on its own below: "best candidate" means a drive effect
     summary = _summary(loc, accepted, final, [c for c in candidates if c.effect != "external_force"],
-                       fit_before, fit_after, scheme)
+                       fit_before, fit_after, scheme, Ts)
     if loc_val is not None:
         summary += (f" On the validation recording (fit {loc_val['fit_pct']:.1f} %): "
                     f"{_validation_where_words(loc_val, disturbance.get('validation'))}.")
@@ -952,8 +953,8 @@ def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance
 
 def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gain: float, need: float,
                folds_ok: bool, sigs: dict, added_to: list[str], implausible: str = "",
-               rms_before: float = math.nan, ev: dict | None = None) -> Candidate:
-    ps = [effect_parameters(s, eff) for s in sc.specs]
+               rms_before: float = math.nan, ev: dict | None = None, *, Ts: float | None = None) -> Candidate:
+    ps = [effect_parameters(s, eff, Ts) for s in sc.specs]
     params = dict(ps[0])
     for k in params:  # the median over folds, of each end for a range
         if isinstance(params[k], float):
@@ -993,11 +994,11 @@ def _rms_words(before_mm: float, after_mm: float) -> str:
 
 
 def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candidate], before: float,
-             after: float, scheme: str) -> str:
+             after: float, scheme: str, Ts: float | None = None) -> str:
     where = _where_words(loc)
     head = f"Mismatch: {where}."
     if accepted:
-        left = "; ".join(_param_words(e, effect_parameters(final, e)) for e in accepted)
+        left = "; ".join(_param_words(e, effect_parameters(final, e, Ts)) for e in accepted)
         return (f"{head} Left out: {left}. Added to the model: held-out tracking-error fit "
                 f"{_fit_words(before, after)}, {_rms_words(loc['held_out_rms_mm'], loc['held_out_rms_after_mm'])} "
                 f"({scheme}).")
