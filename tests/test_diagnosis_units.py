@@ -397,6 +397,18 @@ def test_a_dead_time_is_told_without_the_lag_of_sampling_its_model_carries(where
     assert TimeDelay.within_inherent_lag(spec, 1e-3) == bool(lag)
 
 
+def test_a_two_mass_mode_is_told_with_the_frequency_the_table_rings_at_against_a_held_motor():
+    """f·√μ: motor share μ = 0.36 of the inertia, free-free mode 50 Hz → 30 Hz."""
+    from ident.diagnosis.effects import EFFECT_MODELS, effect_parameters
+
+    spec = ModelSpec(THETA.copy()).with_effect("resonance", {"freq_hz": 50.0, "damping": 0.02,
+                                                             "motor_fraction": 0.36}, 1)
+    p = effect_parameters(spec, "resonance")
+    assert p["locked_motor_hz"] == pytest.approx(30.0)
+    assert "the table rings at 30.0 Hz with the motor held" in EFFECT_MODELS["resonance"].words(p)
+    assert "locked_motor_hz" not in effect_parameters(spec.with_effect("resonance", variant=0), "resonance")
+
+
 def test_a_parameter_with_a_range_is_held_by_later_fits(x_r):
     chunk = _capture_delay_recording(x_r, 0.003)
     spec = ModelSpec(THETA.copy(), ("time_delay",))

@@ -293,9 +293,13 @@ class Resonance(Effect):
     def parameters(self, spec, Ts=None):
         ep = spec.ep
         if spec.modes[3]:
+            # the free-free mode f and the motor's share μ trade along f·√μ, the frequency the
+            # table rings at when a stiff velocity loop holds the motor: what a recording
+            # fixes best (candidates.scan_motor_fraction), told beside f
             return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "motor_fraction": float(ep[11]),
                     "kind": "two_mass", "loop": "motor" if spec.modes[3] == 2 else "table",
-                    "position_motor_share": float(ep[12])}
+                    "position_motor_share": float(ep[12]),
+                    "locked_motor_hz": float(ep[3]) * math.sqrt(max(float(ep[11]), 0.0))}
         return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "gain": float(ep[5]), "kind": "output_filter"}
 
     def set_arrays(self, p, ep, modes):
@@ -320,6 +324,9 @@ class Resonance(Effect):
         return scan_motor_fraction(spec, chunk, cfg)
 
     def words(self, p):
+        if "locked_motor_hz" in p:
+            return (f"resonance at {p['freq_hz']:.1f} Hz (free two-mass mode; the table rings at "
+                    f"{p['locked_motor_hz']:.1f} Hz with the motor held), damping {p['damping']:.3f}")
         return f"resonance at {p['freq_hz']:.1f} Hz, damping {p['damping']:.3f}"
 
     def signature(self, loc):
