@@ -49,7 +49,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
            "sampled_base", "refit_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
-           "chunk_regression", "delayed_regression_start", "centre_delay"]
+           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "polish"]
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
@@ -210,13 +210,9 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     ridge of equal locked-motor frequency, :func:`scan_motor_fraction`).
     """
     starts = [s for b in (base,) + tuple(others) for s in EFFECT_MODELS[effect].starts(b, chunk, evidence, cfg)]
-    # windows only where they cut the work at least in half: on a recording barely longer
-    # than race_seconds they cost what it costs and only add restarts (a 6.8 s LinuxCNC
-    # capture lost its 20 µm gap to them)
-    windowed = 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts
     # 2. screen: free-run cost with the base held (diverging starts drop out), on what the
     # race's last round sees
-    look = chunk.windows(cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s) if windowed else chunk
+    look = race_part(chunk, 1.0, cfg)
     costs = [sse(s, look) for s in starts]
     alive = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
     if not alive:
@@ -224,10 +220,7 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     # 3. race: joint fits on a growing share of race_seconds of the recording (of all of it
     # when 0), the worse half dropped after each round
     for r, (frac, it) in enumerate(zip(cfg.race_fidelity, cfg.race_iter)):
-        if windowed:  # windows spread over the whole recording, warm restarts
-            part = chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
-        else:
-            part = chunk.part(frac)
+        part = race_part(chunk, frac, cfg)
         nfev = cfg.race_evals[r] if cfg.race_evals else 0
         alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, secant_nfev=nfev,
                           search=True, cfg=cfg)
@@ -236,11 +229,29 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
         if r == len(cfg.race_fidelity) - 1 or len(alive) == 1:
             break
         alive = [alive[i] for i in _best_per_variant(alive, costs, max(cfg.joint_starts, len(alive) // 2))]
-    # 4. polish the winner on the whole chunk at the fine step
-    best = alive[int(np.argmin(costs))]
-    best = fit_spec(best, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, search=True,
-                    cfg=cfg)
+    # 4. polish the winner on the whole chunk
+    best = polish(alive[int(np.argmin(costs))], chunk, cfg)
     return EFFECT_MODELS[effect].finish(best, chunk, cfg)
+
+
+def race_part(chunk: Chunk, frac: float, cfg: DiagnosisConfig) -> Chunk:
+    """What a race round at fidelity ``frac`` fits on: ``frac`` × ``cfg.race_seconds`` of
+    windows spread over the whole recording (warm restarts), or the first ``frac`` of every
+    segment (:meth:`Chunk.part`; all of it at 1).
+
+    Windows only where they cut the work at least in half: on a recording barely longer
+    than race_seconds they cost what it costs and only add restarts (a 6.8 s LinuxCNC
+    capture lost its 20 µm gap to them).
+    """
+    if 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts:
+        return chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
+    return chunk.part(frac)
+
+
+def polish(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
+    """A search's winner fitted on the whole ``chunk`` (half of ``cfg.joint_iter``, then the fine step)."""
+    return fit_spec(spec, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, search=True,
+                    cfg=cfg)
 
 
 def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
@@ -323,8 +334,7 @@ def scan_motor_fraction(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> 
         return spec
     i_f, i_mu = EP_INDEX["freq_hz"], EP_INDEX["motor_fraction"]
     f_hat, mu_hat = float(spec.ep[i_f]), float(spec.ep[i_mu])
-    windowed = 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts
-    look = chunk.windows(cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s) if windowed else chunk
+    look = race_part(chunk, 1.0, cfg)
     best, c_best = spec, sse(spec, look)
     # a point where the fit leaves the definition of a mode (ζ on its bound) is not the
     # mode moved along its ridge: the scan keeps the fit a resonance when it was one
@@ -347,8 +357,7 @@ def scan_motor_fraction(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> 
             best, c_best = s1, c1
     if best is spec:
         return spec
-    best = fit_spec(best, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, search=True,
-                    cfg=cfg)
+    best = polish(best, chunk, cfg)
     return best if sse(best, chunk) < sse(spec, chunk) and meant(best) else spec
 
 
