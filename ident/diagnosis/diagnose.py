@@ -953,7 +953,7 @@ def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance
 
 def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gain: float, need: float,
                folds_ok: bool, sigs: dict, added_to: list[str], implausible: str = "",
-               rms_before: float = math.nan, ev: dict | None = None, *, Ts: float | None = None) -> Candidate:
+               rms_before: float = math.nan, ev: dict | None = None, *, Ts: float) -> Candidate:
     ps = [effect_parameters(s, eff, Ts) for s in sc.specs]
     params = dict(ps[0])
     for k in params:  # the median over folds, of each end for a range
@@ -994,7 +994,7 @@ def _rms_words(before_mm: float, after_mm: float) -> str:
 
 
 def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candidate], before: float,
-             after: float, scheme: str, Ts: float | None = None) -> str:
+             after: float, scheme: str, Ts: float) -> str:
     where = _where_words(loc)
     head = f"Mismatch: {where}."
     if accepted:
