@@ -814,3 +814,22 @@ def test_the_position_gains_parametrisation_is_one_of_three_named_settings():
     assert DEFAULT.fit_beta == "all"
     with pytest.raises(ValueError, match="fit_beta"):
         DiagnosisConfig(fit_beta=True)
+
+
+def test_reweighting_by_segment_gives_every_segment_the_weight_of_its_own_residual_variance():
+    # two segments, the model's residual 1 µm rms in the first and 10 µm in the second:
+    # weights σ/σ_seg, so each segment's weighted residual has the same rms (the
+    # Gaussian likelihood with a variance per segment), the restart transients unscored
+    n = 2000
+    starts = np.zeros(n, dtype=bool)
+    starts[[0, 1000]] = True
+    x_r = np.linspace(0.0, 10.0, n)
+    chunk = make_chunk(x_r, x_r, Ts, starts)
+    rng = np.random.default_rng(1)
+    r = np.concatenate([1e-3 * rng.standard_normal(1000), 1e-2 * rng.standard_normal(1000)])
+    w = chunk.reweighted(r).w
+    assert np.all(w[:1000] == w[0]) and np.all(w[1000:] == w[1000])
+    sc = chunk.score
+    a, b = (w * r)[:1000][sc[:1000]], (w * r)[1000:][sc[1000:]]
+    assert np.sqrt(np.mean(a ** 2)) == pytest.approx(np.sqrt(np.mean(b ** 2)), rel=1e-9)
+    assert w[0] / w[1000] == pytest.approx(10.0, rel=0.1)

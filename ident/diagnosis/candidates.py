@@ -254,6 +254,32 @@ def polish(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
                     cfg=cfg)
 
 
+def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
+    """``spec`` re-fitted by maximum likelihood with a noise variance of each segment's own.
+
+    The search's cost weighs each segment by its tracking error (:func:`make_chunk`), as if
+    the model's error were alike everywhere.  Where a segment's response is one no model
+    of its kind can follow in phase — a full-closed loop's integrator hunting across a gap
+    in the low-speed set, stick-slip in a limit cycle (docs/diagnosis.md, stop 35) — least
+    squares shrinks the parameters that make the oscillation (a smaller gap oscillates
+    less, wherever its phase), and that bias is set by how much the segment weighs.  The
+    Gaussian likelihood with variance σ_seg² per segment weighs each by 1/σ_seg², σ_seg
+    the model's own residual there: iteratively reweighted least squares
+    (:meth:`Chunk.reweighted`, then ``cfg.segment_variance_iter`` iterations of
+    :func:`fit_spec`), until no segment's weight moves by more than
+    ``cfg.segment_variance_tol`` or after ``cfg.segment_variance_steps`` re-weightings.
+    The first fit is always made, so ``spec`` is fitted on ``chunk`` even where it has one
+    segment (one variance: the weights of the search).
+    """
+    w_prev = chunk.w
+    for step in range(cfg.segment_variance_steps):
+        weighted = chunk.reweighted(simulate_spec(spec, chunk) - chunk.x)
+        if step and np.max(np.abs(weighted.w / w_prev - 1.0)) < cfg.segment_variance_tol:
+            break
+        spec, w_prev = fit_spec(spec, weighted, max_iter=cfg.segment_variance_iter, cfg=cfg), weighted.w
+    return spec
+
+
 def centre_delay(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
     """``spec``'s dead time moved to the middle of the delays that fit equally well.
 

@@ -160,6 +160,15 @@ class DiagnosisConfig:
     #: Base re-fit iterations of the reference models (re-fits from every candidate's base).
     reference_iter: int = 15
 
+    # -- the accepted model's parameters (candidates.segment_variance_fit) --------------
+    #: The accepted model is re-fitted with a noise variance of each segment's own
+    #: (iteratively reweighted least squares): at most this many re-weightings (0: off) …
+    segment_variance_steps: int = 5
+    #: … each followed by this many iterations …
+    segment_variance_iter: int = 10
+    #: … until no segment's weight moves by more than this share.
+    segment_variance_tol: float = 0.05
+
     # -- a weakly determined dead time (candidates.centre_delay) ------------------------
     #: Delays whose training cost lies within this share of the best fit equally well (2 %
     #: of the cost is 1 % of the residual norm, a third of ``min_relevant``) …

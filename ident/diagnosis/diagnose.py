@@ -22,7 +22,10 @@
    (:func:`_above_noise`), and its parameters are the physics its
    name means (:func:`_plausible`: size bounds, no signature veto); of those that pass, the
    one removing the largest share of the held-out residual wins; greedy forward selection
-   then tries a second one on top by the same rule;
+   then tries a second one on top by the same rule; the accepted model's parameters are
+   then estimated by maximum likelihood with a noise variance of each segment's own
+   (:func:`~ident.diagnosis.candidates.segment_variance_fit`): a segment the model cannot
+   follow in phase no longer pulls them;
 5. **describes** the equivalent input disturbance (:mod:`ident.diagnosis.disturbance`) on
    the identification and validation recordings, and names an ``external_force`` when it
    comes in time blocks the motion does not explain;
@@ -42,7 +45,8 @@ from scipy.signal import lfilter
 
 from core.errors import InputError
 from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, segment_starts
-from ident.diagnosis.candidates import base_variants, fit_spec, refit_base, search, softened_base
+from ident.diagnosis.candidates import (base_variants, fit_spec, refit_base, search, segment_variance_fit,
+                                        softened_base)
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, TimeDelay, effect_parameters
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
@@ -823,13 +827,25 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
             why = f"{dropped} dropped: not significant next to {c.effect} alone"
             candidates[j] = replace(c, accepted=False, score={**c.score, "backward_step": why})
 
+    # the accepted model's parameters by maximum likelihood with a variance per segment
+    # (the selection above stays on the search's weights, under which it was stated)
+    if accepted and cfg.segment_variance_steps:
+        say("re-estimating the accepted model with a variance per segment")
+        prev = current_sc
+        current_sc = scored(per_fold(lambda i, tr, te: segment_variance_fit(prev.specs[i], tr, cfg)))
+        for j, c in enumerate(candidates):
+            if c.accepted:
+                candidates[j] = replace(c, parameters=_fold_parameters(current_sc.specs, c.effect, Ts),
+                                        score={**c.score, "parameters_estimated": "variance per segment"})
     # 5. a load the motion does not cause: described, and added as an input where it is
     external = _external_force(base, full, folds[0][1] if validation is not None else None, disturbance, cfg)
     if external is not None:
         candidates.append(external)
     say("final fit")
     # 6. the final augmented model on all identification data, and the words
-    if accepted:
+    if accepted and cfg.segment_variance_steps:
+        final = segment_variance_fit(current_sc.specs[0], full, cfg)
+    elif accepted:
         final = fit_spec(current_sc.specs[0], full, max_iter=10, cfg=cfg)
     else:
         final = base
@@ -951,17 +967,23 @@ def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance
     return Candidate("external_force", params, _fit_pct(e, r0), _fit_pct(e, r1), bool(gain >= need), score)
 
 
-def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gain: float, need: float,
-               folds_ok: bool, sigs: dict, added_to: list[str], implausible: str = "",
-               rms_before: float = math.nan, ev: dict | None = None, *, Ts: float) -> Candidate:
-    ps = [effect_parameters(s, eff, Ts) for s in sc.specs]
+def _fold_parameters(specs: list[ModelSpec], eff: str, Ts: float) -> dict:
+    """``eff``'s parameters in the fold models: the median over folds, of each end for a range."""
+    ps = [effect_parameters(s, eff, Ts) for s in specs]
     params = dict(ps[0])
-    for k in params:  # the median over folds, of each end for a range
+    for k in params:
         if isinstance(params[k], float):
             params[k] = float(np.median([p[k] for p in ps if isinstance(p.get(k), float)]))
         elif isinstance(params[k], list):
             ends = np.array([p[k] for p in ps if isinstance(p.get(k), list)], dtype=float)
             params[k] = [float(v) for v in np.median(ends, axis=0)]
+    return params
+
+
+def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gain: float, need: float,
+               folds_ok: bool, sigs: dict, added_to: list[str], implausible: str = "",
+               rms_before: float = math.nan, ev: dict | None = None, *, Ts: float) -> Candidate:
+    params = _fold_parameters(sc.specs, eff, Ts)
     score = {
         "held_out_residual_reduction": float(gain),
         "required_reduction": float(need),

@@ -6,6 +6,7 @@ weighted output-error cost of eq. 3.6 (:func:`residual`, :func:`sse`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,6 +55,26 @@ class Chunk:
     def scored(self, mask: np.ndarray) -> "Chunk":
         """The same samples with only ``mask`` (and not the restart transients) scored."""
         return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, self.w, self.score & mask, self.warm)
+
+    def reweighted(self, r: np.ndarray) -> "Chunk":
+        """The same samples weighted by a variance of each segment's own: ``w = σ/σ_seg``,
+        σ_seg the rms of the residual ``r`` (mm, every sample) over the segment's scored
+        samples, σ over all of them (floored at 1e-3·σ, as :func:`make_chunk` floors).
+
+        Under ``r``'s per-segment variances the weighted cost is the Gaussian likelihood
+        (up to constants): a segment whose model residual is large counts for little.
+        """
+        sc = self.score & np.isfinite(r)
+        if not np.any(sc):
+            return self
+        sigma = math.sqrt(float(np.mean(r[sc] ** 2))) or 1.0
+        w = np.ones(self.n)
+        bounds = np.append(np.flatnonzero(self.starts), self.n)
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            m = sc[a:b]
+            s_seg = math.sqrt(float(np.mean(r[a:b][m] ** 2))) if np.any(m) else sigma
+            w[a:b] = sigma / max(s_seg, 1e-3 * sigma)
+        return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, w, self.score, self.warm)
 
     def part(self, frac: float) -> "Chunk":
         """The first part of every segment holding ``frac`` of its scored samples (a cheaper
