@@ -27,7 +27,9 @@ bounds and scales (:mod:`ident.diagnosis.effects`):
    with the fine difference step.
 
 A weakly determined dead time is then moved to the middle of the delays that fit equally
-well (:func:`centre_delay`).  Every fit works in scaled coordinates ``z = p / s`` (s = |start|
+well (:func:`centre_delay`).  Once the diagnosis has accepted an effect, its model is
+re-estimated by maximum likelihood with a noise variance per segment
+(:func:`segment_variance_fit`).  Every fit works in scaled coordinates ``z = p / s`` (s = |start|
 or a floor) so one difference step suits parameters as different as a3 ≈ 1e6 1/s³ and b0 ≈ 1.
 """
 
@@ -49,7 +51,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
            "sampled_base", "refit_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
-           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "polish"]
+           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "polish",
+           "segment_variance_fit"]
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
