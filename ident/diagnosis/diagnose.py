@@ -844,7 +844,9 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     say("final fit")
     # 6. the final augmented model on all identification data, and the words
     if accepted and cfg.segment_variance_steps:
-        final = segment_variance_fit(current_sc.specs[0], full, cfg)
+        # with a validation recording the one fold trained on all identification data and
+        # was re-estimated there above: that model is the final one
+        final = current_sc.specs[0] if folds[0][0] is full else segment_variance_fit(current_sc.specs[0], full, cfg)
     elif accepted:
         final = fit_spec(current_sc.specs[0], full, max_iter=10, cfg=cfg)
     else:
