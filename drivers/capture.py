@@ -31,8 +31,18 @@ Who counts what (no loss is counted twice):
   one of the ``dropped`` samples: ``dropped`` is what the recording misses,
   ``corrupt`` says how many of those were seen damaged.
 * ``received`` — samples written to the log; ``reconnects`` — from the driver.
-* ``duplicates`` — samples whose counter did not advance (repeated or out of order);
-  not written, since recording time must increase.
+* ``duplicates`` — samples whose counter did not advance (repeated, or one stray sample
+  behind the last); not written, since recording time must increase.
+
+A second sample behind the last one recorded that counts on from the first is a
+controller restart: the capture ends ``"controller restarted"`` (its samples would land
+on the old run's times).  :class:`~drivers.plausibility.ClockCheck` compares the
+controller time the samples span with the host time they took to arrive; a clock more
+than 1.5 times off ends the capture ``"clock mismatch"`` (a wrong sample period or counter
+word order).  A capture that records no sample fails whatever stopped it.  Once the
+inputs are valid (URL, options, register map) and before connecting, a file left at
+``out`` by an earlier capture is removed, so a capture that fails before its stream starts
+leaves no file that could pass for its log.
 
 A capture that reads sample data but records none of it, or less than
 :data:`MIN_RECORDED_SHARE` of it (the rest rejected as corrupt or counted in the driver's

@@ -12,7 +12,8 @@ and actual = -k counts (1 nm each), so a capture's every sample can be checked a
 the tick it belongs to.  Faults are the controller's own: a counter that restarts
 (``restart_at``), a word order (``word_order``) the map may not say, an announced period
 (``announced_period_s``) that is not the real one, a status register that never says
-running (``running=False``).
+running (``running=False``).  Without ``info_period`` the info block names no period,
+so a capture takes it from its register map.
 """
 
 from __future__ import annotations
@@ -43,11 +44,12 @@ class TickServer:
 
     def __init__(self, ticks: int = 1500, period_s: float = 0.001, announced_period_s: float | None = None,
                  word_order: str = "big", restart_at: int | None = None, running: bool = True,
-                 capacity: int = 2000, programs: tuple[str, ...] = ()) -> None:
+                 capacity: int = 2000, programs: tuple[str, ...] = (), info_period: bool = True) -> None:
         self.ticks, self.period_s = ticks, period_s
         self.announced = period_s if announced_period_s is None else announced_period_s
         self.order, self.restart_at, self.running = word_order, restart_at, running
         self.capacity = capacity
+        self.info_period = info_period
         self.regs = np.zeros(65536, dtype=np.uint16)
         self.lock = threading.Lock()
         self.started = threading.Event()
@@ -64,7 +66,9 @@ class TickServer:
                          threading.Thread(target=self._tick, daemon=True)]
 
     def _write_info(self, programs: tuple[str, ...]) -> None:
-        text = f"controller=fault peer\naxes=X\nperiod_s={self.announced!r}\n"
+        text = "controller=fault peer\naxes=X\n"
+        if self.info_period:  # else the capture takes the period from the register map
+            text += f"period_s={self.announced!r}\n"
         text += "".join(f"program={p}\n" for p in programs)
         raw = text.encode()
         raw += b"\0" * (len(raw) % 2)

@@ -36,10 +36,17 @@ so a short outage loses nothing that is still in the ring.
 *live*: each poll reads status, counter and positions in one request (the default layout
 keeps them contiguous).  A counter that moved by more than one tick since the previous
 poll leaves a gap (ticks the poller never saw, counted as dropped by the capture).  A
+counter that went back is handed over as read, for the capture loop to tell a restart;
+the first :data:`LIVE_ORDER_SAMPLES` counters are checked for the other word order.  Polls
+whose status says neither running nor ended are not samples (:attr:`idle_polls`); a
+capture that sees only those says so (:meth:`unusable_reason`).  A
 poll is a request/response round trip scheduled by two
 processes, so polling never sees every 1 kHz tick (how many it sees depends on the
 machine's load: benchmarks/bench_capture.py --transport modbus measures it); over a real RS-485 line at
 115200 baud a poll of 6 axes takes ~8 ms.  Use trace mode for identification.
+
+The register map file is loaded and checked when the driver is made, before any
+connection is tried.
 
 Errors: a Modbus exception 4 (server device failure) or 8 (memory parity error), a frame
 with a bad CRC (RTU) or a response of the wrong length is rejected, counted in
