@@ -23,7 +23,7 @@ from typing import Callable, Sequence
 
 from core.recording import Sample
 
-__all__ = ["MAX_SPEED", "JumpCheck", "CLOCK_TOLERANCE", "CLOCK_WINDOW_S", "ClockCheck"]
+__all__ = ["MAX_SPEED", "JumpCheck", "CLOCK_TOLERANCE", "CLOCK_WINDOW_S", "CLOCK_SLACK_S", "ClockCheck"]
 
 #: Speeds no feed drive reaches, per unit: linear-motor machine-tool axes reach about 5 m/s
 #: (300 m/min), so 20 m/s cannot be motion; rotary axes 100 rev/s (6000 rpm, spindle speed).
@@ -38,6 +38,11 @@ CLOCK_TOLERANCE = 1.5
 #: Host time, s, that must have passed since the reference sample before the clocks are
 #: compared; shorter captures are not judged (their late arrivals would dominate).
 CLOCK_WINDOW_S = 1.0
+#: The two clocks must also differ by this much, s of host time, before the ratio counts:
+#: a capture process stalled by a loaded machine receives samples late, which lowers the
+#: ratio early on without the clocks being wrong; a wrong clock builds up a difference
+#: that grows with the capture (0.5 s after 1 s at half or double speed).
+CLOCK_SLACK_S = 0.5
 
 
 class JumpCheck:
@@ -88,7 +93,8 @@ class ClockCheck:
     its backlog over in that batch, after which samples arrive as they are made.  From
     then on, for the newest sample, ratio = (c - c_ref) x T / (host time - host time of
     the reference); once :data:`CLOCK_WINDOW_S` of host time has passed, a ratio outside
-    ``expected / CLOCK_TOLERANCE .. expected x CLOCK_TOLERANCE`` is an error.
+    ``expected / CLOCK_TOLERANCE .. expected x CLOCK_TOLERANCE`` is an error when the two
+    clocks also differ by :data:`CLOCK_SLACK_S` or more.
 
     Parameters
     ----------
@@ -118,7 +124,7 @@ class ClockCheck:
             return None
         ctrl = (counter - c0) * self.T
         ratio = ctrl / host / self.expected
-        if 1.0 / CLOCK_TOLERANCE <= ratio <= CLOCK_TOLERANCE:
+        if 1.0 / CLOCK_TOLERANCE <= ratio <= CLOCK_TOLERANCE or abs(ctrl / self.expected - host) < CLOCK_SLACK_S:
             return None
         speed = "" if self.expected == 1.0 else f" (expected {self.expected:g} times, a replay at that speed)"
         measured = host * self.expected / (counter - c0) if counter > c0 else float("inf")

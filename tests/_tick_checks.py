@@ -12,6 +12,7 @@ sample names the tick it belongs to.  A capture passes when either
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -43,6 +44,13 @@ def assert_one_error_line(res: subprocess.CompletedProcess, *fragments: str) -> 
     for f in fragments:
         assert f in lines[0], lines[0]
     return lines[0]
+
+
+def clock_ratio(line: str) -> float:
+    """The ratio a ``clock mismatch`` error line states ("... clock runs R times as fast ...")."""
+    m = re.search(r"clock runs ([0-9.e+-]+) times as fast as the host's", line)
+    assert m, line
+    return float(m.group(1))
 
 
 def ticks_of(log: Recording, counts_per_mm: float) -> np.ndarray:
