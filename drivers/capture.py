@@ -223,7 +223,8 @@ def capture(
     Parameters
     ----------
     port : ``--port`` URL (SPEC §3); its scheme picks the driver.
-    out : the ``.mcap`` file to write (overwritten).
+    out : the ``.mcap`` file to write.  A file already there is removed once the inputs are
+        checked, before connecting (docs/capture.md, What is written when).
     axes : axis names to record (default: every axis the controller streams).
     duration : stop after this much controller time, s (None: until the program ends or Ctrl-C).
     progress : show the live progress line on stderr.

@@ -54,6 +54,8 @@ actual = 266
 scale_mm = 1e-6
 """
 
+MAP_WITHOUT_TRACE = MAP.split("[trace]")[0] + MAP.split("base = 1024\n")[1]
+
 
 @pytest.fixture
 def ctrl_map(tmp_path):
@@ -143,6 +145,18 @@ def test_a_bad_map_is_reported_before_any_connection_is_tried(tmp_path, map_text
     res = run_capture(f"modbus-tcp://127.0.0.1:{free_port()}?map=ctrl.toml", tmp_path)
     line = assert_one_error_line(res, expected)
     assert "cannot connect" not in line
+
+
+@pytest.mark.parametrize("extra, expected", [
+    ("&mode=trace", "mode=trace but register map ctrl.toml has no [trace] block"),
+    ("", "--axes: the controller has no axis 'Q' (axes: X)"),
+])
+def test_options_that_contradict_the_map_are_reported_before_any_connection_is_tried(tmp_path, extra, expected):
+    (tmp_path / "ctrl.toml").write_text(MAP_WITHOUT_TRACE if extra else MAP)
+    res = run_capture(f"modbus-tcp://127.0.0.1:{free_port()}?map=ctrl.toml{extra}", tmp_path,
+                      *([] if extra else ["--axes", "Q"]))
+    assert_one_error_line(res, expected)
+    assert res.returncode == 2
 
 
 def test_a_program_name_with_a_space_is_kept_whole(tmp_path):

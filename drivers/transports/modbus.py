@@ -153,6 +153,11 @@ class ModbusDriver(Driver):
             raise InputError.about("port", f"{url.raw}: no device; use modbus-rtu:///dev/ttyUSB0?baud=115200")
         # Every input is checked before the network is touched: the register map file too.
         self._map_file = load_map(Path(self.map_path)) if self.map_path else None
+        if self._map_file is not None:
+            self._check_axes(self._map_file)
+            if self.mode_option == "trace" and self._map_file.trace is None:
+                raise InputError.about("port", f"{url.raw}: mode=trace but register map {self._map_file.source} "
+                                               f"has no [trace] block")
         self.rmap: RegisterMap | None = None
         #: extra counts beyond CaptureStats: ticks missing (counter gaps; the capture loop counts
         #: these as dropped, so stats.dropped stays 0), timeouts, busy answers, requests sent
@@ -170,6 +175,13 @@ class ModbusDriver(Driver):
         self.idle_polls = 0  # live: polls whose status did not say running (nothing valid to record)
         self._last_status = 0
         self._live_words: list[tuple[int, int]] = []  # live: counter register pairs of the first samples
+
+    def _check_axes(self, rmap: RegisterMap) -> None:
+        """``--axes`` must name axes of the map (known before connecting when a map file is given)."""
+        names = list(rmap.axis_names)
+        unknown = [a for a in (self.wanted_axes or []) if a not in names]
+        if unknown:
+            raise InputError.about("axes", f"the controller has no axis {unknown[0]!r} (axes: {', '.join(names)})")
 
     # -- connection ---------------------------------------------------------------------------
     def _make_client(self):
@@ -352,9 +364,7 @@ class ModbusDriver(Driver):
         if self.mode == "trace" and rmap.trace is None:
             raise InputError.about("port", f"{self.url.raw}: mode=trace but register map {rmap.source} has no [trace] block")
         names = list(rmap.axis_names)
-        unknown = [a for a in (self.wanted_axes or []) if a not in names]
-        if unknown:
-            raise InputError.about("axes", f"the controller has no axis {unknown[0]!r} (axes: {', '.join(names)})")
+        self._check_axes(rmap)
         # Every axis is decoded; the capture loop keeps the --axes it wants.
         self._cols = list(range(len(names)))
         self._per_unit = np.array([counts_per_unit(rmap.axes[i].scale_mm) for i in self._cols])
