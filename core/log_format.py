@@ -52,11 +52,15 @@ END_REASONS: dict[str, str] = {
     "transport error": "the link failed for good (port gone, connection not re-established, bus silent)",
     "unusable data": "the controller sent data but (almost) none of it could be recorded, "
                      "e.g. trace records whose counters never match (word order or map layout)",
+    "controller restarted": "the controller's sample counter went back and counted on (a restart): "
+                            "what follows is a new run, for a new capture",
+    "clock mismatch": "the controller's clock ran much faster or slower than the host's "
+                      "(a wrong sample period or counter word order): its times would be wrong",
     "finished": "agent simulate: the whole simulated run was written",
     "error": "an unexpected error stopped the recording (the summary's error names it)",
 }
 #: The end reasons after which ``agent capture`` exits non-zero (the summary's ``error`` says why).
-FAILED_ENDS = frozenset({"transport error", "unusable data", "error"})
+FAILED_ENDS = frozenset({"transport error", "unusable data", "controller restarted", "clock mismatch", "error"})
 
 #: Every ``kind`` of an ``/events`` message -> what it marks.
 EVENT_KINDS: dict[str, str] = {

@@ -31,8 +31,18 @@ Who counts what (no loss is counted twice):
   one of the ``dropped`` samples: ``dropped`` is what the recording misses,
   ``corrupt`` says how many of those were seen damaged.
 * ``received`` — samples written to the log; ``reconnects`` — from the driver.
-* ``duplicates`` — samples whose counter did not advance (repeated or out of order);
-  not written, since recording time must increase.
+* ``duplicates`` — samples whose counter did not advance (repeated, or one stray sample
+  behind the last); not written, since recording time must increase.
+
+A second sample behind the last one recorded that counts on from the first is a
+controller restart: the capture ends ``"controller restarted"`` (its samples would land
+on the old run's times).  :class:`~drivers.plausibility.ClockCheck` compares the
+controller time the samples span with the host time they took to arrive; a clock more
+than 1.5 times off ends the capture ``"clock mismatch"`` (a wrong sample period or counter
+word order).  A capture that records no sample fails whatever stopped it.  Once the
+inputs are valid (URL, options, register map) and before connecting, a file left at
+``out`` by an earlier capture is removed, so a capture that fails before its stream starts
+leaves no file that could pass for its log.
 
 A capture that reads sample data but records none of it, or less than
 :data:`MIN_RECORDED_SHARE` of it (the rest rejected as corrupt or counted in the driver's
@@ -51,7 +61,7 @@ import threading
 import time
 import warnings
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
 
@@ -59,11 +69,16 @@ from core.errors import InputError, RapidIdentError, RapidIdentWarning, StreamEr
 from core.log_format import FAILED_ENDS
 from drivers.base import Driver, Sample, StreamInfo
 from core.writer import McapRecorder
-from drivers.plausibility import JumpCheck
+from drivers.plausibility import ClockCheck, JumpCheck
 from drivers.registry import open_driver
-from drivers.url import parse_port_url
+from drivers.url import PortURL, parse_port_url
 
-__all__ = ["CaptureSummary", "capture", "select_axes", "MIN_RECORDED_SHARE"]
+__all__ = ["CaptureSummary", "capture", "select_axes", "MIN_RECORDED_SHARE", "REPLAY_OPTION"]
+
+#: URL option of every transport, taken by the capture loop itself: the controller replays
+#: at this many times real time (``agent serve --speed F`` prints it in its URL), so its
+#: clock is expected to run that much faster than the host's (drivers.plausibility.ClockCheck).
+REPLAY_OPTION = "replay_speed"
 
 #: Below this share of the sample records read (recorded + corrupt + skipped) being recorded,
 #: the capture has failed: a faulty link loses a few per cent, a map that does not fit the
@@ -208,7 +223,8 @@ def capture(
     Parameters
     ----------
     port : ``--port`` URL (SPEC §3); its scheme picks the driver.
-    out : the ``.mcap`` file to write (overwritten).
+    out : the ``.mcap`` file to write.  A file already there is removed once the inputs are
+        checked, before connecting (docs/capture.md, What is written when).
     axes : axis names to record (default: every axis the controller streams).
     duration : stop after this much controller time, s (None: until the program ends or Ctrl-C).
     progress : show the live progress line on stderr.
@@ -227,8 +243,12 @@ def capture(
         raise InputError(f"-o {out}: a capture is written as MCAP; use a .mcap file name")
     if not out.parent.is_dir():
         raise InputError(f"-o {out}: directory {out.parent} does not exist")
-    url = parse_port_url(port)
-    driver = open_driver(url, axes)
+    url, speed = _replay_speed(parse_port_url(port))
+    driver = open_driver(url, axes)  # checks every option (and loads a register map) before any I/O
+    # Every input is valid: the capture starts.  A log left at -o by an earlier capture goes
+    # now, so a capture that fails before the stream starts leaves no file that reads as its own.
+    if out.is_file() or out.is_symlink():
+        out.unlink()
     stop = _Stop()
     with _signals(stop):
         info = driver.open()
@@ -236,13 +256,26 @@ def capture(
             if stop.event.is_set():
                 raise TransportError(f"{stop.reason} while connecting to {url.raw}; nothing recorded")
             idx = select_axes(info, axes)
-            return _record(driver, info, idx, url.raw, url.scheme, out, duration, progress, read_timeout, stop)
+            return _record(driver, info, idx, url.raw, url.scheme, out, duration, progress, read_timeout, stop,
+                           speed)
         finally:
             driver.close()
 
 
+def _replay_speed(url: PortURL) -> tuple[PortURL, float]:
+    """The URL without :data:`REPLAY_OPTION` (no driver knows it), and its value (1 if absent)."""
+    if REPLAY_OPTION not in url.query:
+        return url, 1.0
+    speed = url.option(REPLAY_OPTION, float)
+    if not speed > 0:  # inf: a replay as fast as possible, whose clock is not checked
+        raise InputError.about("port", f"{url.raw}: {REPLAY_OPTION}={speed:g} must be > 0")
+    query = {k: v for k, v in url.query.items() if k != REPLAY_OPTION}
+    return replace(url, query=query), speed
+
+
 def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme: str, out: Path,
-            duration: float | None, progress: bool, read_timeout: float, stop: _Stop) -> CaptureSummary:
+            duration: float | None, progress: bool, read_timeout: float, stop: _Stop,
+            speed: float = 1.0) -> CaptureSummary:
     names = [info.axes[i] for i in idx]
     units = [info.units[i] for i in idx] if len(info.units) == len(info.axes) else ["mm"] * len(idx)
     T = info.sample_period
@@ -265,7 +298,9 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
     t0 = time.monotonic()
     bar = _Progress(progress, port)
     jumps = JumpCheck(names, units, T, driver.position_hint)
+    clock = ClockCheck(T, speed, getattr(driver, "clock_hint", lambda: "")())
     last = None  # last counter written
+    behind = None  # counter of the sample just read that went back (a stray one, or a restart)
     last_seg = None
     seen_corrupt = seen_reconnects = 0
     try:
@@ -284,8 +319,18 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
                 c = s.counter
                 if last is not None:
                     if c <= last:
+                        if c < last and behind is not None and behind < c:
+                            # Two samples behind the last one, counting on: the controller restarted.
+                            summary.duplicates -= 1  # ``behind`` was no duplicate but the new run's start
+                            summary.end = "controller restarted"
+                            summary.error = (f"the controller restarted: its sample counter went back from {last} "
+                                             f"to {behind} and counted on ({c}); the samples up to counter {last} "
+                                             f"are recorded, the new run needs a new capture")
+                            break
                         summary.duplicates += 1
+                        behind = c if c < last else None
                         continue
+                    behind = None
                     gap = c - last - 1
                     if gap:
                         summary.dropped += gap
@@ -306,6 +351,10 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
                 last = c
                 for msg in jumps.check(s):
                     _warn(rec, summary, c, msg)
+            if batch and last is not None and not summary.end:
+                wrong = clock.check(last, time.monotonic())
+                if wrong:
+                    summary.end, summary.error = "clock mismatch", wrong
             st = driver.stats
             if st.corrupt != seen_corrupt:
                 rec.event("corrupt", last or 0, st.corrupt - seen_corrupt, "frames rejected by the integrity check")
@@ -336,7 +385,7 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
         summary.dropped += st.dropped  # driver-known losses that are not counter gaps
         summary.last_counter = last
         if last is not None:
-            summary.duration_s = (last - summary.first_counter + 1) * T
+            summary.duration_s = (last - summary.first_counter) * T  # first to last sample, as Recording.duration
         summary.wall_s = time.monotonic() - t0
         summary.skipped = st.skipped
         if not summary.end:  # a BaseException other than Exception (e.g. SystemExit)
@@ -358,13 +407,20 @@ def _warn(rec: McapRecorder, summary: CaptureSummary, counter: int, message: str
 
 
 def _judge(summary: CaptureSummary, driver: Driver) -> None:
-    """End ``"unusable data"`` when sample records were read but (almost) none recorded.
+    """End ``"unusable data"`` when sample records were read but (almost) none recorded,
+    and fail a capture that recorded no sample at all, whatever stopped it.
 
     A capture that already failed keeps its own end and error.
     """
     if summary.end in FAILED_ENDS:
         return
     read = summary.received + summary.corrupt + summary.skipped
+    if not read:
+        why = driver.unusable_reason()
+        summary.error = (f"no sample recorded (stopped by: {summary.end}): "
+                         + (why or f"the controller sent no sample in {summary.wall_s:.1f} s"))
+        summary.end = "unusable data" if why else "transport error"
+        return
     if not read or summary.received >= MIN_RECORDED_SHARE * read:
         return
     why = []

@@ -7,19 +7,42 @@ so even a slow axis (1 mm/s at 1 nm per count and 1 kHz) appears to jump 65 mm p
 sample.  :class:`JumpCheck` flags the first step of each axis' commanded or actual
 position that is faster than any feed drive moves (:data:`MAX_SPEED`), once per axis,
 as a warning: the capture goes on and records what it reads.
+
+A wrong sample period (a map saying 1 ms for a controller sampling at 2 ms) or a counter
+read in the wrong word order gives times that are wrong throughout, yet every sample
+looks fine on its own.  Only the host clock can tell: :class:`ClockCheck` compares the
+controller time the samples span (counter x period) with the host time over which they
+arrived, and reports a capture whose controller clock runs more than
+:data:`CLOCK_TOLERANCE` times faster or slower than the host's as an error.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Callable, Sequence
 
 from core.recording import Sample
 
-__all__ = ["MAX_SPEED", "JumpCheck"]
+__all__ = ["MAX_SPEED", "JumpCheck", "CLOCK_TOLERANCE", "CLOCK_WINDOW_S", "CLOCK_SLACK_S", "ClockCheck"]
 
 #: Speeds no feed drive reaches, per unit: linear-motor machine-tool axes reach about 5 m/s
 #: (300 m/min), so 20 m/s cannot be motion; rotary axes 100 rev/s (6000 rpm, spindle speed).
 MAX_SPEED: dict[str, float] = {"mm": 20_000.0, "deg": 36_000.0}
+
+#: A controller clock this many times faster or slower than the host's is wrong.  Quartz
+#: clocks agree to 1e-4; the margin covers when samples arrive, not how fast time runs:
+#: a poll, a USB transfer or a scheduler stall can hand samples over ~0.1 s late, which
+#: over :data:`CLOCK_WINDOW_S` is a ratio of 1.1.  The errors it is there for are 2x
+#: (a period of 1 ms announced for 2 ms, or the reverse) and 65536x (swapped counter words).
+CLOCK_TOLERANCE = 1.5
+#: Host time, s, that must have passed since the reference sample before the clocks are
+#: compared; shorter captures are not judged (their late arrivals would dominate).
+CLOCK_WINDOW_S = 1.0
+#: The two clocks must also differ by this much, s of host time, before the ratio counts:
+#: a capture process stalled by a loaded machine receives samples late, which lowers the
+#: ratio early on without the clocks being wrong; a wrong clock builds up a difference
+#: that grows with the capture (0.5 s after 1 s at half or double speed).
+CLOCK_SLACK_S = 0.5
 
 
 class JumpCheck:
@@ -60,3 +83,52 @@ class JumpCheck:
                                f"faster than any feed drive ({limit:g} {unit}/s); a wrong word order or "
                                f"scale reads like this: check {self.hint(axis)}")
         return out
+
+
+class ClockCheck:
+    """Compare the controller's clock with the host's as batches of samples arrive.
+
+    The reference is the last sample of the first batch, when it arrived: a buffered
+    transport (a Modbus trace ring, a serial stream joined before its info frame) hands
+    its backlog over in that batch, after which samples arrive as they are made.  From
+    then on, for the newest sample, ratio = (c - c_ref) x T / (host time - host time of
+    the reference); once :data:`CLOCK_WINDOW_S` of host time has passed, a ratio outside
+    ``expected / CLOCK_TOLERANCE .. expected x CLOCK_TOLERANCE`` is an error when the two
+    clocks also differ by :data:`CLOCK_SLACK_S` or more.
+
+    Parameters
+    ----------
+    sample_period : the controller sample period T_s the capture stamps samples with, s.
+    expected : how fast the controller's clock runs against the host's (1 for a real
+        controller; F for one replaying at F times real time, ``agent serve --speed F``).
+    hint : where the period and the counter's word order are set (the driver's words).
+    """
+
+    def __init__(self, sample_period: float, expected: float = 1.0, hint: str = "") -> None:
+        self.T = sample_period
+        self.expected = expected
+        self.hint = hint
+        self._ref: tuple[int, float] | None = None
+
+    def check(self, counter: int, host_s: float) -> str | None:
+        """The error for the newest sample ``counter`` having arrived at host time ``host_s`` (s,
+        monotonic), or None while the clocks agree (or too little host time has passed)."""
+        if not math.isfinite(self.expected):
+            return None
+        if self._ref is None:
+            self._ref = (counter, host_s)
+            return None
+        c0, h0 = self._ref
+        host = host_s - h0
+        if host < CLOCK_WINDOW_S:
+            return None
+        ctrl = (counter - c0) * self.T
+        ratio = ctrl / host / self.expected
+        if 1.0 / CLOCK_TOLERANCE <= ratio <= CLOCK_TOLERANCE or abs(ctrl / self.expected - host) < CLOCK_SLACK_S:
+            return None
+        speed = "" if self.expected == 1.0 else f" (expected {self.expected:g} times, a replay at that speed)"
+        measured = host * self.expected / (counter - c0) if counter > c0 else float("inf")
+        return (f"the controller's clock runs {ratio * self.expected:.3g} times as fast as the host's{speed}: "
+                f"counters {c0}..{counter} span {ctrl:.6g} s at the announced sample period {self.T:g} s but "
+                f"arrived over {host:.3f} s of host time (a sample every {measured:.3g} s); the log's times "
+                f"would be wrong: check {self.hint or 'the sample period the controller announces'}")

@@ -117,7 +117,10 @@ def serve(
     report = source.fault_report()
     try:
         endpoint.start()
-        print(f"port: {endpoint.port_url()}", file=stdout, flush=True)
+        url = endpoint.port_url()
+        if speed != 1.0:  # the capture's clock check then expects this controller to run `speed` x real time
+            url += f"{'&' if '?' in url else '?'}replay_speed={speed:g}"
+        print(f"port: {url}", file=stdout, flush=True)
         if fault_log:
             _write_json(fault_log, report)
         endpoint.run()

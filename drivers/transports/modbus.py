@@ -36,10 +36,17 @@ so a short outage loses nothing that is still in the ring.
 *live*: each poll reads status, counter and positions in one request (the default layout
 keeps them contiguous).  A counter that moved by more than one tick since the previous
 poll leaves a gap (ticks the poller never saw, counted as dropped by the capture).  A
+counter that went back is handed over as read, for the capture loop to tell a restart;
+the first :data:`LIVE_ORDER_SAMPLES` counters are checked for the other word order.  Polls
+whose status says neither running nor ended are not samples (:attr:`idle_polls`); a
+capture that sees only those says so (:meth:`unusable_reason`).  A
 poll is a request/response round trip scheduled by two
 processes, so polling never sees every 1 kHz tick (how many it sees depends on the
 machine's load: benchmarks/bench_capture.py --transport modbus measures it); over a real RS-485 line at
 115200 baud a poll of 6 axes takes ~8 ms.  Use trace mode for identification.
+
+The register map file is loaded and checked when the driver is made, before any
+connection is tried.
 
 Errors: a Modbus exception 4 (server device failure) or 8 (memory parity error), a frame
 with a bad CRC (RTU) or a response of the wrong length is rejected, counted in
@@ -72,6 +79,7 @@ from core.errors import InputError, MachineError, StreamError, TransportError
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.modbus_map import (
     STATUS_ENDED,
+    STATUS_RUNNING,
     RegisterMap,
     decode_info,
     decode_u32,
@@ -96,6 +104,8 @@ _EXC_NAMES = {1: "illegal function", 2: "illegal data address", 3: "illegal data
 #: written trace records read from the start of a capture, none holding its counter, after which
 #: the map cannot fit the controller (a controller that drops ticks still writes most of them)
 MISMATCH_LIMIT = 32
+#: live counters read before the word-order check judges them
+LIVE_ORDER_SAMPLES = 8
 _CORRUPT_EXC = {4, 8}  # the data could not be delivered intact this time: retry
 _BUSY_EXC = {5, 6}
 
@@ -141,6 +151,13 @@ class ModbusDriver(Driver):
             raise InputError.about("port", f"{url.raw}: no host; use modbus-tcp://HOST:PORT")
         if url.scheme == "modbus-rtu" and not url.path:
             raise InputError.about("port", f"{url.raw}: no device; use modbus-rtu:///dev/ttyUSB0?baud=115200")
+        # Every input is checked before the network is touched: the register map file too.
+        self._map_file = load_map(Path(self.map_path)) if self.map_path else None
+        if self._map_file is not None:
+            self._check_axes(self._map_file)
+            if self.mode_option == "trace" and self._map_file.trace is None:
+                raise InputError.about("port", f"{url.raw}: mode=trace but register map {self._map_file.source} "
+                                               f"has no [trace] block")
         self.rmap: RegisterMap | None = None
         #: extra counts beyond CaptureStats: ticks missing (counter gaps; the capture loop counts
         #: these as dropped, so stats.dropped stays 0), timeouts, busy answers, requests sent
@@ -155,6 +172,16 @@ class ModbusDriver(Driver):
         self._deferred_error: TransportError | None = None
         self._matched_any = False  # some trace record held its counter: the layout fits
         self._unmatched: list[tuple[np.ndarray, np.ndarray]] = []  # (counters, records) read before a match
+        self.idle_polls = 0  # live: polls whose status did not say running (nothing valid to record)
+        self._last_status = 0
+        self._live_words: list[tuple[int, int]] = []  # live: counter register pairs of the first samples
+
+    def _check_axes(self, rmap: RegisterMap) -> None:
+        """``--axes`` must name axes of the map (known before connecting when a map file is given)."""
+        names = list(rmap.axis_names)
+        unknown = [a for a in (self.wanted_axes or []) if a not in names]
+        if unknown:
+            raise InputError.about("axes", f"the controller has no axis {unknown[0]!r} (axes: {', '.join(names)})")
 
     # -- connection ---------------------------------------------------------------------------
     def _make_client(self):
@@ -311,10 +338,7 @@ class ModbusDriver(Driver):
         if not self._connect():
             where = self.url.path if self.url.scheme == "modbus-rtu" else f"{self.url.host}:{self.url.port or 502}"
             raise TransportError(f"{self.url.raw}: cannot connect to {where}")
-        if self.map_path:
-            rmap = load_map(Path(self.map_path))
-        else:
-            rmap = None
+        rmap = self._map_file
         base = rmap or default_map(["X"])  # the info block is at the same place in any default layout
         if self.unit_option is not None:
             base = replace(base, unit=self.unit_option)
@@ -340,9 +364,7 @@ class ModbusDriver(Driver):
         if self.mode == "trace" and rmap.trace is None:
             raise InputError.about("port", f"{self.url.raw}: mode=trace but register map {rmap.source} has no [trace] block")
         names = list(rmap.axis_names)
-        unknown = [a for a in (self.wanted_axes or []) if a not in names]
-        if unknown:
-            raise InputError.about("axes", f"the controller has no axis {unknown[0]!r} (axes: {', '.join(names)})")
+        self._check_axes(rmap)
         # Every axis is decoded; the capture loop keeps the --axes it wants.
         self._cols = list(range(len(names)))
         self._per_unit = np.array([counts_per_unit(rmap.axes[i].scale_mm) for i in self._cols])
@@ -358,7 +380,8 @@ class ModbusDriver(Driver):
             extra["trace_capacity"] = self.capacity
         programs = []
         for entry in info.get("program", []):
-            name, _, sha = entry.partition(" ")
+            # "<name> <sha256>": a name may hold spaces ("low speed.nc"), a SHA-256 cannot
+            name, _, sha = entry.rpartition(" ") if " " in entry else (entry, "", "")
             programs.append({"name": name, "sha256": sha})
         return StreamInfo(axes=tuple(names), sample_period=period,
                           controller=str(info.get("controller", f"Modbus unit {rmap.unit}")),
@@ -522,6 +545,15 @@ class ModbusDriver(Driver):
         return (d % self.capacity == 0) | (((1 << 32) - d) % self.capacity == 0)
 
     def unusable_reason(self) -> str:
+        if getattr(self, "mode", None) == "live":
+            if self.idle_polls and not self.stats.received and self.rmap is not None:
+                return (f"the status register (address {self.rmap.status} of register map {self.rmap.source}) "
+                        f"never said running (bit 0) or ended (bit 1) in {self.idle_polls} polls (last read "
+                        f"0x{self._last_status:04x}); check [status] address, or is the program started?")
+            return ""
+        if not self.stats.received and not self.stats.skipped and self.rmap is not None and self.rmap.trace:
+            return (f"the trace head (address {self.rmap.trace.head} of register map {self.rmap.source}) did "
+                    f"not advance: the controller wrote no trace record; is the program started?")
         if self._matched_any or not self._unmatched:
             return "trace slots did not hold the counters expected in them (ticks the controller did not write)"
         expect = np.concatenate([e for e, _ in self._unmatched])
@@ -555,6 +587,41 @@ class ModbusDriver(Driver):
                 f"device.word_order = \"{rmap.word_order}\" or the record layout of register map "
                 f"{rmap.source} do not match the controller (docs/modbus.md, Trace record)")
 
+    def _check_live_word_order(self, first: int, second: int) -> None:
+        """Stop when the first live counters only make sense in the other word order.
+
+        Read in the wrong order, counter c of a controller below 65536 ticks decodes as
+        c x 65536: successive polls step by whole multiples of 65536, a clock running 65536
+        times too fast.  The other order then gives small forward steps.
+        """
+        words = self._live_words
+        if len(words) >= LIVE_ORDER_SAMPLES:
+            return
+        words.append((first, second))
+        if len(words) < LIVE_ORDER_SAMPLES:
+            return
+        rmap = self.rmap
+        assert rmap is not None
+        a = np.array([w[0] for w in words], dtype=np.uint16)
+        b = np.array([w[1] for w in words], dtype=np.uint16)
+        other = "little" if rmap.word_order == "big" else "big"
+        steps = np.diff(decode_u32(a, b, rmap.word_order, signed=False).astype(np.int64))
+        alt = np.diff(decode_u32(a, b, other, signed=False).astype(np.int64))
+        if np.all(np.abs(steps) >= 1 << 16) and np.all((alt > 0) & (alt < 1 << 16)):
+            first_word = "low" if other == "little" else "high"
+            where = (f"in [device] of register map {rmap.source}" if rmap.source != "default"
+                     else "in a register map (map=FILE.toml; the default layout is high word first)")
+            raise StreamError(
+                f"{self.url.raw}: the live sample counter steps by {int(np.median(np.abs(steps)))} per poll in "
+                f"\"{rmap.word_order}\" word order but by {int(np.median(alt))} in \"{other}\": the controller "
+                f"writes 32-bit values {first_word} word first; set word_order = \"{other}\" {where}")
+
+    def clock_hint(self) -> str:
+        """Where the sample period and the counter's word order are set, for the clock check."""
+        src = self.rmap.source if self.rmap is not None else "default"
+        return (f"the sample period (period_s in the controller's info block, else device.sample_period_s "
+                f"of register map {src}) and device.word_order of the counter")
+
     def position_hint(self, axis: str) -> str:
         src = self.rmap.source if self.rmap is not None else "default"
         return f"word_order and scale_mm of axis {axis} in register map {src}"
@@ -582,12 +649,18 @@ class ModbusDriver(Driver):
                 self._deferred_error = exc  # hand over what was polled; raise on the next read()
                 return out
             status = int(regs[i_status])
+            self._last_status = status
             u32 = int(decode_u32(regs[i_cnt], regs[i_cnt + 1], rmap.word_order, signed=False))
             counter = u32 if self._last_live is None else self._unwrap(u32, self._last_live)
-            if status & 1 or status & STATUS_ENDED:  # nothing is valid before the controller runs
-                if self._last_live is None or counter > self._last_live:
-                    if self._last_live is not None:
+            if not status & (STATUS_RUNNING | STATUS_ENDED):
+                self.idle_polls += 1
+            else:  # nothing is valid before the controller runs
+                if self._last_live is None or counter != self._last_live:
+                    # A counter that went back is handed over too: the capture loop tells a
+                    # restart (it counts on from there) from a stray sample.
+                    if self._last_live is not None and counter > self._last_live:
                         self.gaps += counter - self._last_live - 1
+                    self._check_live_word_order(int(regs[i_cnt]), int(regs[i_cnt + 1]))
                     self._last_live = counter
                     cmd = [int(decode_u32(regs[j], regs[j + 1], o, True)) / float(n)
                            for j, o, n in zip(i_cmd, self._orders, self._per_unit)]

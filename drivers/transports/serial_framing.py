@@ -33,6 +33,8 @@ and resynchronise after lost or damaged bytes.  What they count:
   header is intact but whose CRC fails counts once and is skipped whole; a stretch of
   bytes that cannot be framed at all (e.g. a damaged length field) counts once; an
   ASCII line with a bad checksum or bad fields counts once.
+* ``rejected_info`` — info messages that passed their checksum but lack a required
+  field (period, scale or axes): they are also counted like damaged frames.
 * ``skipped_bytes`` — bytes thrown away while searching for a frame.  Bytes before the
   first good frame after :meth:`reset` (joining a stream mid-frame) are skipped but
   not counted as corrupt.
@@ -123,6 +125,7 @@ class BinaryCodec:
     name: str = "binary"
     corrupt: int = 0
     skipped_bytes: int = 0
+    rejected_info: int = 0
     _buf: bytearray = field(default_factory=bytearray, repr=False)
     _synced: bool = False
     _in_garbage: bool = False
@@ -220,6 +223,7 @@ class BinaryCodec:
                 frame = self._decode(ftype, bytes(body[3:]))
                 body.release()
                 if frame is None:  # CRC fine but contents impossible: a protocol error
+                    self.rejected_info += ftype == T_INFO
                     self._garbage(end - p)
                 else:
                     frames.append(frame)
@@ -280,6 +284,14 @@ def _checksum(body: bytes) -> int:
     return x
 
 
+def _checksum_ok(line: bytes) -> bool:
+    """Whether a ``$...*HH`` line's checksum holds (its fields may still be wrong)."""
+    try:
+        return line[-3:-2] == b"*" and int(line[-2:], 16) == _checksum(line[1:-3])
+    except ValueError:
+        return False
+
+
 def _line(body: str) -> bytes:
     raw = body.encode("ascii")
     return b"$" + raw + b"*%02X\r\n" % _checksum(raw)
@@ -297,6 +309,7 @@ class AsciiCodec:
     name: str = "ascii"
     corrupt: int = 0
     skipped_bytes: int = 0
+    rejected_info: int = 0
     _buf: bytearray = field(default_factory=bytearray, repr=False)
     _synced: bool = False
 
@@ -352,6 +365,7 @@ class AsciiCodec:
                 continue
             frame = self._parse(line)
             if frame is None:
+                self.rejected_info += line.startswith(b"$I,") and _checksum_ok(line)
                 self._reject(len(raw) + 1)
             else:
                 frames.append(frame)

@@ -92,10 +92,9 @@ class SerialDriver(Driver):
             while self._frame_info is None:
                 left = deadline - time.monotonic()
                 if left <= 0:
-                    hint = (f"; {seen} bytes arrived but none formed a {self.format} frame - wrong format= or baud="
-                            if seen else "; nothing arrived - is the controller streaming?")
                     raise TransportTimeout(
-                        f"no info frame from serial port {self.path} within {self.open_timeout:g} s{hint}")
+                        f"no info frame from serial port {self.path} within {self.open_timeout:g} s; "
+                        + self._no_info_hint(seen))
                 data = self._receive(min(left, 0.1))
                 seen += len(data)
                 self._handle(self.codec.feed(data), self._early)
@@ -115,6 +114,25 @@ class SerialDriver(Driver):
             programs=tuple(fi.programs),
             extra={"format": self.format, "baud": self.baud, "counts_per_mm": fi.counts_per_mm},
         )
+
+    def _no_info_hint(self, seen: int) -> str:
+        """What arrived instead of an info frame: the words tell a silent line, a wrong format or
+        baud rate, a rejected info frame and a controller that never repeats its info frame apart."""
+        samples, rejected = len(self._pending), self.codec.rejected_info
+        if rejected:
+            return (f"{rejected} info frame(s) arrived intact but were rejected: an info message needs a period "
+                    f"and a scale > 0 and at least one axis name (docs/serial-protocol.md, info)")
+        if samples:
+            return (f"{samples} valid {self.format} sample frames arrived but no info frame: the controller must "
+                    f"send its info message when it starts streaming and then repeat it (every second is "
+                    f"recommended), since opening the port discards what was queued (docs/serial-protocol.md)")
+        if seen:
+            return f"{seen} bytes arrived but none formed a {self.format} frame - wrong format= or baud="
+        return "nothing arrived - is the controller streaming?"
+
+    def clock_hint(self) -> str:
+        """Where the sample period is set, for the capture's clock check."""
+        return "the period_ns the controller announces in its info message"
 
     def _close(self) -> None:
         if self._ser is not None:
