@@ -75,7 +75,8 @@ def tracking_bandwidth_hz(r: AxisResult) -> float | None:
 
 
 def _um(mm: float) -> str:
-    return f"{mm * 1e3:.3g} µm"
+    """A length in µm, or in mm from 1 mm up."""
+    return f"{mm:.3g} mm" if abs(mm) >= 1.0 else f"{mm * 1e3:.3g} µm"
 
 
 def _accepted(r: AxisResult) -> dict[str, dict]:
