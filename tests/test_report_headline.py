@@ -114,3 +114,30 @@ def test_terms_are_explained_in_words(backlash):
     assert "dead time of 5 ms (preview shift -5 samples" in text
     assert "the frequency-response plot includes it" in text
     assert "sits on the upper bound f_max" in text  # the 500 Hz pole
+
+
+def test_against_a_simulated_recording_is_named_in_the_summary_and_the_report(tmp_path, clean):
+    """``--against SIM`` leaves a visible trace: the file, its fit to the recording, what was compared."""
+    from core.reader import load_recording
+    from core.recording import Recording
+    from core.writer import write_recording_csv
+
+    rec = load_recording(FIX / "clean_pid.csv")
+    x = rec.axes["X"]
+    # what `agent simulate --machine result.json` gives for the same program: the identified model's run
+    sim_actual = clean.axes["X"].predict(x.commanded, segment=rec.segment, x0=x.actual)
+    sim = write_recording_csv(Recording.from_arrays(rec.t, {"X": x.commanded}, {"X": sim_actual},
+                                                    segment=rec.segment), tmp_path / "sim.csv")
+    report = tmp_path / "r.html"
+    res = CliRunner().invoke(cli.app, ["identify", str(FIX / "clean_pid.csv"), "--against", str(sim),
+                                       "--report", str(report), "--json", str(tmp_path / "r.json")])
+    assert res.exit_code == 0, res.stderr
+    line = next(l for l in res.stdout.splitlines() if l.strip().startswith("compared:"))
+    assert str(sim) in line and "--against" in line
+    head = _text(report.read_text()[:report.read_text().index("</div>")])
+    assert f"compared with {sim} (--against)" in head
+    import json
+
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["recording"]["against"] == str(sim)
+    assert doc["axes"]["X"]["diagnosis"]["mismatch"]["compared_with"] == "simulated recording"
