@@ -24,7 +24,7 @@ import numpy as np
 from ident.results import AxisResult, IdentifyResult
 
 __all__ = ["AxisHeadline", "axis_headline", "result_headlines", "comparison_words", "term_notes", "HELD_OUT", "THESIS",
-           "tracking_bandwidth_hz"]
+           "tracking_bandwidth_hz", "supported_band_hz", "COHERENT"]
 
 #: the name of the one held-out figure
 HELD_OUT = "held-out fit"
@@ -74,6 +74,24 @@ def tracking_bandwidth_hz(r: AxisResult) -> float | None:
     return float(f[below[0]]) if below.size else None
 
 
+#: coherence γ² above which the recording is taken to support an estimate of the response
+COHERENT = 0.9
+
+
+def supported_band_hz(r: AxisResult) -> float | None:
+    """Highest frequency up to which the recording supports the tracking response: the H1 estimate's
+    coherence (ident.frf_estimate) stays ≥ :data:`COHERENT` from its lowest frequency up to here, Hz."""
+    from ident.frf_estimate import h1_estimate
+
+    if r.traces is None:
+        return None
+    est = h1_estimate(r.traces.commanded, r.traces.actual, 1.0 / r.sample_period, segment=r.traces.segment)
+    if est is None or est.coherence[0] < COHERENT:
+        return None
+    low = np.flatnonzero(est.coherence < COHERENT)
+    return float(est.f[low[0] - 1] if low.size else est.f[-1])
+
+
 def _um(mm: float) -> str:
     """A length in µm, or in mm from 1 mm up."""
     return f"{mm:.3g} mm" if abs(mm) >= 1.0 else f"{mm * 1e3:.3g} µm"
@@ -108,6 +126,10 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
              + (f"{bw:.3g} Hz (−3 dB)" if bw else "beyond the Nyquist frequency"))
     if r.shift:
         ident += f", {_shift_words(r)}"
+    band = supported_band_hz(r)
+    if band is not None:
+        ident += (f"; the recording carries information on the response up to {band:.3g} Hz (coherence ≥ "
+                  f"{COHERENT} of the estimate from the data): above that the data do not check the model")
     d = r.diagnosis
     accepted = _accepted(r) if d is not None else {}
     fv, fi = r.fit_validation, r.fit_identification
@@ -219,5 +241,5 @@ def comparison_words(r: AxisResult, against_source: str | None = None) -> str | 
         return None
     name = against_source or "the simulated recording"
     return (f"compared with {name} (--against): that simulated recording reproduces this recording's tracking "
-            f"error with a fit of {loc.get('fit_pct', float('nan')):.2f} % (the SPEC metric with the simulated "
+            f"error with a fit of {loc.get('fit_pct', float('nan')):.2f} % (the same tracking-error fit with the simulated "
             f"recording in place of the model's free run); the diagnosis locates the mismatch on their difference")

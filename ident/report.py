@@ -16,15 +16,13 @@ from pathlib import Path
 import numpy as np
 
 from ident.frf_estimate import h1_estimate
-from ident.headline import THESIS, axis_headline, comparison_words, term_notes
+from ident.headline import COHERENT, THESIS, axis_headline, comparison_words, term_notes
 from ident.html_page import page, png, pyplot, table, write_html
 from ident.results import AxisResult, AxisTraces, IdentifyResult
 
 __all__ = ["write_report", "render_report"]
 
 _MAX_POINTS = 6000
-#: coherence γ² above which the recording is taken to support an estimate of the response
-_COHERENT = 0.9
 
 
 def _decimate(*arrays: np.ndarray) -> list[np.ndarray]:
@@ -48,18 +46,18 @@ def _bode(r: AxisResult) -> str:
         tr = r.traces
         est = h1_estimate(tr.commanded, tr.actual, 1.0 / r.sample_period, segment=tr.segment)
     if est is not None:
-        good = est.coherence >= _COHERENT
+        good = est.coherence >= COHERENT
         # the estimate's phase on the final model's branch (±360°), so a delay's long phase lag reads as one curve
         ref = np.degrees(np.unwrap(np.angle(r.model.freqresp(est.f)[0] * np.exp(
             2j * np.pi * est.f * r.shift * r.sample_period))))
         ph_est = np.degrees(np.angle(est.H))
         ph_est += 360.0 * np.round((ref - ph_est) / 360.0)
-        for sel, color, label in ((good, "k", f"from the recording (H1, γ² ≥ {_COHERENT})"),
-                                  (~good, "0.7", f"from the recording, γ² < {_COHERENT}: no information")):
+        for sel, color, label in ((good, "k", f"from the recording (H1, γ² ≥ {COHERENT})"),
+                                  (~good, "0.7", f"from the recording, γ² < {COHERENT}: no information")):
             ax[0, 0].semilogx(est.f[sel], 20 * np.log10(np.abs(est.H[sel])), ".", ms=3, color=color, label=label)
             ax[1, 0].semilogx(est.f[sel], ph_est[sel], ".", ms=3, color=color)
         ax[2, 0].semilogx(est.f, est.coherence, color="k", lw=0.8)
-        ax[2, 0].axhline(_COHERENT, color="0.6", lw=0.6, ls=":")
+        ax[2, 0].axhline(COHERENT, color="0.6", lw=0.6, ls=":")
         ax[2, 0].set_ylim(0, 1.05)
         ax[2, 0].set_ylabel("coherence γ²")
     shift_words = f", preview shift {r.shift} samples" if r.shift else ""
@@ -321,8 +319,8 @@ def _axis_section(r: AxisResult, result: IdentifyResult) -> str:
              ("preview shift", f"{r.shift} samples ({r.shift * r.sample_period * 1e3:+.3g} ms)"),
              ("time", ", ".join(f"{k} {v:.2f} s" for k, v in r.timings.items()))]
     parts.append(table(rows))
-    parts.append("<p class='cite'>All fits are SPEC's tracking-error fit % = 100·(1 − ‖e − ê‖/‖e − mean(e)‖), "
-                 "e = x_r − x recorded, ê from the model's free run on the command alone.</p>")
+    parts.append("<p class='cite'>Every fit is the tracking-error fit % = 100·(1 − ‖e − ê‖/‖e − mean(e)‖) of "
+                 "docs/identification.md, e = x_r − x recorded, ê from the model's free run on the command alone.</p>")
     parts.append(_parameter_table(r))
     parts.append(_roots_table(r))
     notes = term_notes(r)

@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from agent import cli
-from ident.headline import HELD_OUT, THESIS
+from ident.headline import HELD_OUT, THESIS, supported_band_hz
 from ident.pipeline import identify
 from ident.report import render_report
 
@@ -50,6 +50,9 @@ def test_a_clean_machine_report_opens_with_the_answer_not_a_mismatch_box(clean):
     assert "Missing physics" in head and "nothing the data can show" in head
     assert f"{HELD_OUT} {x.fit_validation.tracking_error_fit_pct:.2f} %" in head
     assert "What to do" in head and "nothing to fix" in head
+    band = supported_band_hz(x)
+    assert 10.0 < band < 0.5 / x.sample_period
+    assert f"carries information on the response up to {band:.3g} Hz" in head
     # the headline comes before every figure and the diagnosis's own words
     first_img = page.index("<img")
     assert page.index("class='headline'") < first_img < page.index("<h3>Diagnosis</h3>")
