@@ -243,9 +243,11 @@ def _bins(rows: list[dict], lo: str, hi: str, unit: str, scale: float = 1.0) -> 
 def _localisation(loc: dict, title: str) -> str:
     """Where the residual concentrates, as tables in µm and s (the JSON holds the same in mm)."""
     parts = [f"<h4>{html.escape(title)}</h4>"]
-    facts = [("residual rms", f"{_f(loc.get('rms_mm'), 1e3)} µm"),
-             ("fit of the compared model on this recording", f"{_f(loc.get('fit_pct'), 1.0, '.2f')} %"),
-             ("compared with", str(loc.get("compared_with", "the identified model"))),
+    # the residual of the diagnosis's reference model, or of the --against recording (whose fit the headline gives)
+    against = loc.get("compared_with") == "simulated recording"
+    facts = [("residual of", "the simulated recording (--against)" if against
+              else "the reference model (eq. 3.3 re-fitted by the diagnosis)"),
+             ("residual rms", f"{_f(loc.get('rms_mm'), 1e3)} µm"),
              ("reversals", str(loc.get("reversals", "n/a"))),
              ("share of residual energy within 30 ms after a reversal",
               f"{100 * loc.get('after_reversal_30ms_share', 0.0):.0f} % (in {100 * loc.get('after_reversal_30ms_time_share', 0.0):.0f} % of the time)")]
