@@ -1,4 +1,9 @@
-"""The terminal summary of an identification: parameters, poles/zeros, constraints, fits, time."""
+"""The terminal summary of an identification: the answer first (ident.headline), then the details.
+
+Figures are named as in the report and the JSON: the one "held-out fit" (SPEC §5 on the
+validation recording), the "fit on the identification recording" (not held out), the
+diagnosis's "reference fit".
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,7 @@ import math
 
 import typer
 
+from ident.headline import axis_headline, comparison_words, term_notes
 from ident.results import IdentifyResult
 
 
@@ -16,22 +22,31 @@ def _fmt(v: float) -> str:
 def print_summary(result: IdentifyResult) -> None:
     echo = typer.echo
     echo(f"recording {result.source}" + (f", validated on {result.validation_source}" if result.validation_source else ""))
+    against = result.metadata.get("against")
     for name, r in result.axes.items():
+        h = axis_headline(r, result.validation_source)
+        echo(f"\naxis {name}")
+        echo(f"  identified:      {h.identified}")
+        echo(f"  predicts:        {h.held_out}")
+        cmp = comparison_words(r, against)
+        if cmp:
+            echo(f"  compared:        {cmp}")
+        echo(f"  missing physics: {h.missing}")
+        echo(f"  what to do:      {h.action}")
         m = r.model
-        echo(f"\naxis {name}: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
+        echo(f"  details: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
              + f", preview shift {r.shift} sample(s)")
         echo("  model (eq. 3.3): " + ", ".join(f"{k}={_fmt(getattr(m, k))}" for k in
                                                  ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")))
         echo("  poles:  " + "; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.poles()))
         echo("  zeros:  " + ("; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.zeros()) or "none"))
         echo("  active constraints: " + (", ".join(r.active_constraints) or "none"))
+        for note in term_notes(r):
+            echo(f"  note: {note}")
         fi = r.fit_identification
-        line = f"  tracking-error fit: identification {fi.tracking_error_fit_pct:.2f} % (prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm)"
-        if r.fit_validation is not None:
-            fv = r.fit_validation
-            line += f", validation {fv.tracking_error_fit_pct:.2f} % (prediction error rms {fv.tracking_error_rms_mm * 1e3:.2f} µm)"
-        echo(line)
-        echo(f"  equation-error model before refinement: {r.fit_constrained.tracking_error_fit_pct:.2f} %")
+        echo(f"  tracking-error fit on the identification recording (not held out): {fi.tracking_error_fit_pct:.2f} % "
+             f"(prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm); equation-error model before "
+             f"refinement {r.fit_constrained.tracking_error_fit_pct:.2f} %")
         echo(f"  unconstrained LS: {r.unconstrained_note}")
         if r.diagnosis is not None:
             echo("  diagnosis: " + r.diagnosis.summary)

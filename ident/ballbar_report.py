@@ -35,6 +35,40 @@ def _figures(tests: Sequence[SyntheticBallbar]) -> str:
                         "scale mismatch", "reversal spike / step (µm)"))
 
 
+def _cause_words(t: SyntheticBallbar) -> list[str]:
+    """The reading of the plot with each reversal step named by its cause in the model.
+
+    A ballbar reads a step at an axis reversal as backlash by convention; the synthetic test
+    knows which term of the model makes it (its ``causes``: the step with friction or
+    backlash removed), so the step is named after the larger one.
+    """
+    out = []
+    for w in t.words():
+        if w.startswith("backlash step on "):
+            axis = w.split()[3]
+            c = t.causes.get(axis, {})
+            full = c.get("model", {}).get("step_um", 0.0)
+            parts = {term: full - c[f"without_{term}"]["step_um"] for term in ("friction", "backlash")
+                     if f"without_{term}" in c}
+            cause = max(parts, key=lambda k: abs(parts[k])) if parts else None
+            words = {"friction": "friction, not backlash (the model has none)" if "backlash" not in parts
+                     else "friction", "backlash": "backlash"}
+            rest = w[len("backlash step on "):]
+            w = f"reversal step on {rest}" + (f", caused by {words[cause]}" if cause else "")
+        out.append(w)
+    return out
+
+
+def _polar(t: SyntheticBallbar) -> str:
+    fig = plot_ballbar(t.result, t.measured)
+    ax = fig.axes[0]
+    # the legend beside the plot, clear of the 270° reversal marks and labels
+    ax.legend(loc="upper left", bbox_to_anchor=(1.05, 1.0), fontsize=8)
+    runs = "predicted and recorded" if t.measured is not None else "predicted"
+    return png(fig, f"Ballbar polar plot of {t.machine}: {runs} ccw and cw runs, radial deviation from the "
+                    f"nominal {t.radius:g} mm circle, with the axis reversal points marked.")
+
+
 def render_ballbar_report(tests: Sequence[SyntheticBallbar]) -> str:
     """The report as one HTML string."""
     t0 = tests[0]
@@ -46,8 +80,8 @@ def render_ballbar_report(tests: Sequence[SyntheticBallbar]) -> str:
              "<h2>Figures</h2>", _figures(tests)]
     for t in tests:
         parts.append(f"<h2>{html.escape(t.machine)}</h2>")
-        parts.append("<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in t.words()) + "</ul>")
-        parts.append(png(plot_ballbar(t.result, t.measured)))
+        parts.append("<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in _cause_words(t)) + "</ul>")
+        parts.append(_polar(t))
     return page("rapid-ident ballbar", parts)
 
 

@@ -18,7 +18,9 @@ __all__ = ["pyplot", "png", "table", "page", "write_html", "CSS"]
 CSS = """body{font-family:system-ui,sans-serif;max-width:1150px;margin:auto;padding:1em;color:#222}
 table{border-collapse:collapse;margin:.5em 0}th,td{border:1px solid #ccc;padding:3px 8px;text-align:left;font-size:14px}
 th{background:#f3f3f3}img{max-width:100%;margin:.5em 0}.verdict{font-weight:600;background:#fff8e0;padding:.5em}
-pre{font-size:12px;background:#f7f7f7;padding:.5em;overflow:auto}.warn{background:#fde8e8;padding:.5em}"""
+pre{font-size:12px;background:#f7f7f7;padding:.5em;overflow:auto}.warn{background:#fde8e8;padding:.5em}
+.headline{background:#eef5ee;border-left:4px solid #3a7d44;padding:.4em 1em;margin:.5em 0}
+.headline dt{font-weight:600;margin-top:.3em}.headline dd{margin-left:1em}.cite{font-size:13px;color:#555}"""
 
 
 def pyplot():
@@ -31,12 +33,13 @@ def pyplot():
     return pyplot
 
 
-def png(fig) -> str:
-    """An ``<img>`` holding ``fig`` as an embedded PNG; closes the figure."""
+def png(fig, alt: str) -> str:
+    """An ``<img>`` holding ``fig`` as an embedded PNG with ``alt`` (what the figure shows); closes the figure."""
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
     pyplot().close(fig)
-    return '<img alt="figure" src="data:image/png;base64,' + base64.b64encode(buf.getvalue()).decode() + '">'
+    return (f'<img alt="{html.escape(alt, quote=True)}" src="data:image/png;base64,'
+            + base64.b64encode(buf.getvalue()).decode() + '">')
 
 
 def table(rows: list[tuple[str, str]], header: tuple[str, ...] | None = None) -> str:

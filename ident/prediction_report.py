@@ -78,14 +78,20 @@ def _toolpath_plot(summaries: Sequence[PredictionSummary]) -> str:
         ax.plot(rec.axes[a].commanded, rec.axes[b].commanded, color="0.85", lw=0.8, zorder=0)
         sc = ax.scatter(rec.axes[a].commanded[k], rec.axes[b].commanded[k], c=np.abs(s.contour[k]) * 1e3,
                         s=4, cmap="viridis", vmin=0, vmax=vmax)
-        for p in s.worst[:3]:
-            ax.annotate(f"line {p.line}", (p.position_mm[a], p.position_mm[b]), fontsize=8, color="C3")
+        # one label per program line, fanned out from its point so labels never sit on each other
+        shown_lines = list({p.line: p for p in reversed(s.worst[:3])}.values())[::-1]
+        for i, p in enumerate(shown_lines):
+            ax.annotate(f"line {p.line}", (p.position_mm[a], p.position_mm[b]), xytext=(14, 14 - 16 * i),
+                        textcoords="offset points", fontsize=8, color="C3",
+                        bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8),
+                        arrowprops=dict(arrowstyle="-", color="C3", lw=0.6))
         ax.set_xlabel(f"{a} (mm)")
         ax.set_ylabel(f"{b} (mm)")
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(s.machine, fontsize=10)
     fig.colorbar(sc, ax=axs[0].tolist(), label="|contour error| (µm)")
-    return png(fig)
+    return png(fig, "Toolpath of " + "; ".join(s.machine for s in shown) + " in the plane of the first two axes, "
+                    "coloured by the predicted |contour error|, with the worst program lines labelled.")
 
 
 def _time_plot(summaries: Sequence[PredictionSummary]) -> str:
@@ -113,7 +119,8 @@ def _time_plot(summaries: Sequence[PredictionSummary]) -> str:
                 axs[row + j, 0].plot(rec.t[k], rec.axes[axis].tracking_error[k] * 1e3, color=f"C{i}", lw=0.8)
         axs[row + j, 0].set_ylabel(f"{axis} tracking\nerror (µm)")
     axs[-1, 0].set_xlabel("time (s)")
-    return png(fig)
+    return png(fig, "Predicted " + ("contour error and " if with_contour else "") + "tracking error of axes "
+                    + ", ".join(axes) + " against time, one colour per machine.")
 
 
 def _comparison(c: Comparison) -> str:
@@ -133,7 +140,7 @@ def _comparison(c: Comparison) -> str:
     ax.set_xlabel("time (s)")
     ax.set_ylabel("contour error (µm)")
     ax.legend(fontsize=8)
-    parts.append(png(fig))
+    parts.append(png(fig, f"Contour error against time, measured on {c.source} and predicted by the model."))
     return "\n".join(parts)
 
 

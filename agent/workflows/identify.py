@@ -27,6 +27,8 @@ def identify_files(path: Path, *, validate: Path | None = None, against: Path | 
         prior=load_models(model) if model is not None else None,
         **options,
     )
+    if against is not None:  # named in the summary, report and JSON ("recording.against")
+        result.metadata["against"] = str(against)
     if json_out is not None:
         write_json(result.to_json(), json_out)
     if report is not None:

@@ -892,8 +892,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     summary = _summary(loc, accepted, final, [c for c in candidates if c.effect != "external_force"],
                        fit_before, fit_after, scheme, Ts)
     if loc_val is not None:
-        summary += (f" On the validation recording (fit {loc_val['fit_pct']:.1f} %): "
-                    f"{_validation_where_words(loc_val, disturbance.get('validation'))}.")
+        summary += f" On the validation recording: {_validation_where_words(loc_val, disturbance.get('validation'))}."
     if external is not None and external.accepted:
         summary += (f" An external force: {external.score['words']}; as an input it takes the "
                     f"{external.score['recording']} recording's fit {_fit_words(external.fit_before_pct, external.fit_after_pct)}.")
@@ -1023,17 +1022,18 @@ def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candi
     head = f"Mismatch: {where}."
     if accepted:
         left = "; ".join(_param_words(e, effect_parameters(final, e, Ts)) for e in accepted)
-        return (f"{head} Left out: {left}. Added to the model: held-out tracking-error fit "
+        # "reference fit": eq. 3.3 as the diagnosis re-fitted it, not the identified model (ident/headline.py)
+        return (f"{head} Left out: {left}. Added to the model: reference fit "
                 f"{_fit_words(before, after)}, {_rms_words(loc['held_out_rms_mm'], loc['held_out_rms_after_mm'])} "
                 f"({scheme}).")
     best = max(cands, key=lambda c: c.fit_after_pct) if cands else None
     tail = ""
     if best is not None:
-        tail = (f" (best candidate {best.effect}: {_fit_words(best.fit_before_pct, best.fit_after_pct)}, "
+        tail = (f" (best candidate {best.effect}: reference fit {_fit_words(best.fit_before_pct, best.fit_after_pct)}, "
                 f"{_rms_words(best.score['held_out_rms_before_mm'], best.score['held_out_rms_after_mm'])}, "
                 f"not significant)")
     wh = loc.get("whiteness", {})
     white = "white" if wh.get("white") else "not white"
     return (f"{head} Left out: none — no effect of the vocabulary improves the held-out fit significantly"
-            f"{tail}; held-out tracking-error fit {before:.2f} %, held-out residual rms "
+            f"{tail}; reference fit {before:.2f} %, held-out residual rms "
             f"{1e3 * loc['held_out_rms_mm']:.3g} µm, {white}.")
