@@ -171,6 +171,20 @@ def _param_text(v) -> str:
     return str(v)
 
 
+def _interval_section(r: AxisResult) -> str:
+    """Each parameter, pole and zero with its 95 % interval and 'at bound' / 'not determined' mark."""
+    u = r.uncertainty
+    if u is None:
+        return ""
+    verdict = "equivalent" if u.is_equivalent else "physical"
+    return ("<h3>How well the data determine each parameter (95 % intervals)</h3>"
+            + table(u.rows(), header=("quantity", "value", "95 % interval", "mark"))
+            + f"<p class='{verdict}'>{html.escape(u.equivalent_text())}</p>"
+            + f"<p>Intervals from the output-error fit's Jacobian; the residual is correlated, so "
+              f"{u.n_samples} samples count as about {u.effective_samples:.0f} independent ones "
+              f"(blocks of {u.block_length} samples).</p>")
+
+
 def _axis_section(r: AxisResult) -> str:
     m = r.model
     parts = [f"<h2>Axis {html.escape(r.axis)}</h2>"]
@@ -188,6 +202,7 @@ def _axis_section(r: AxisResult) -> str:
              ("zeros", "; ".join(f"{f:.2f} Hz, ζ {d:.2f}" for f, d in m.zeros()) or "none"),
              ("time", ", ".join(f"{k} {v:.2f} s" for k, v in r.timings.items()))]
     parts.append(table(rows))
+    parts.append(_interval_section(r))
     parts.append("<h3>What unconstrained least squares gives, and why the constraints matter</h3>")
     parts.append(f"<p>{html.escape(r.unconstrained_note)}</p>")
     parts.append(_bode(r))

@@ -210,11 +210,27 @@ class Uncertainty:
 
     def equivalent_text(self) -> str:
         if not self.is_equivalent:
-            return ("The parameters are determined and inside the bounds: the model can be read as the "
-                    "drive's physical closed loop.")
+            return ("Every parameter is determined by the data and no bound holds a pole.  The intervals measure "
+                    "the noise only: where the drive differs from eq. 3.3 (a sampled controller, a delay) the "
+                    "parameters are those of the closest eq. 3.3 model and can differ from its physical gains by "
+                    "more than the intervals.")
         return ("Equivalent model: " + "; ".join(self.why) + ". What is identified is the tracking response "
                 "over the band the recording excites, not the drive's physical gains (as the thesis found for "
                 "its P-PI drive, Table 3.3).")
+
+    def rows(self) -> list[tuple[str, str, str, str]]:
+        """(quantity, value, 95 % interval, mark) per parameter, search variable, pole and zero,
+        as text for the summary and the report."""
+        out = []
+        for k, iv in self.parameters.items():
+            out.append((k, _g(iv.value), f"[{_g(iv.lo)}, {_g(iv.hi)}]", iv.mark()))
+        for kind, roots in (("pole", self.poles), ("zero", self.zeros)):
+            for i, rt in enumerate(roots, 1):
+                lo, hi = rt.freq_hz_interval95
+                dlo, dhi = rt.damping_interval95
+                out.append((f"{kind} {i}", f"{rt.freq_hz:.4g} Hz, ζ {rt.damping:.2f}",
+                            f"[{_g(lo)}, {_g(hi)}] Hz, ζ [{dlo:.2f}, {dhi:.2f}]", rt.mark()))
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         """JSON additions of one axis (keys beside SPEC's "model", "poles", "zeros")."""
@@ -235,6 +251,10 @@ class Uncertainty:
                         "effective": _f(self.effective_samples)},
             "residual_rms_mm": _f(self.residual_rms_mm),
         }
+
+
+def _g(v: float) -> str:
+    return f"{v:.4g}" if math.isfinite(v) else "unbounded"
 
 
 def _f(v: float) -> float | None:
@@ -571,7 +591,7 @@ def estimate_uncertainty(model: DriveModel, J: np.ndarray, r: np.ndarray, *, bou
         comp = {PARAMETER_NAMES[i]: float(vec[i]) for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.25}
         weak.append(WeakDirection(comp, hw, _weak_text(comp)))
 
-    why = _equivalence_reasons(model, params, poles, zeros, pole0, zero0, weak)
+    why = _equivalence_reasons(model, params, poles, zeros, pole0, zero0, weak, f_top)
     return Uncertainty(parameters=params, poles=poles, zeros=zeros, weak_directions=weak, covariance=cov,
                        n_samples=int(r.size), block_length=int(L), n_blocks=int(B),
                        effective_samples=float(r.size / tau), residual_rms_mm=float(np.sqrt(np.mean(r * r))),
@@ -580,7 +600,7 @@ def estimate_uncertainty(model: DriveModel, J: np.ndarray, r: np.ndarray, *, bou
 
 def _equivalence_reasons(model: DriveModel, params: dict[str, Interval], poles: list[RootInterval],
                          zeros: list[RootInterval], pole0: np.ndarray, zero0: np.ndarray,
-                         weak: list[WeakDirection]) -> list[str]:
+                         weak: list[WeakDirection], f_max_hz: float) -> list[str]:
     why = []
     for k, iv in params.items():
         if iv.at_bound and k in SEARCH_NAMES:
@@ -596,6 +616,12 @@ def _equivalence_reasons(model: DriveModel, params: dict[str, Interval], poles: 
     if model.d0 < 0 or model.d1 > 0:
         why.append(f"the friction terms push the axis along its motion (d0 = {model.d0:.4g}, d1 = {model.d1:.4g} "
                    "mm/s²; physical Coulomb friction has d0 ≥ 0 ≥ d1): they absorb something other than friction")
+    rhp = [z for z in zeros if z.damping_interval95[1] < 0 and z.freq_hz_interval95[1] < f_max_hz]
+    if rhp:
+        where = "; ".join(dict.fromkeys(f"{z.freq_hz:.4g} Hz, ζ {z.damping:.2f}" for z in rhp))
+        why.append(f"zeros in the right half-plane ({where}), below the frequency bound: with usual gains the "
+                   "drives of eq. 3.4/3.5 have their zeros in the left half-plane; the model makes a delay "
+                   "(sampled control, DAC, the preview shift) with them")
     for i, sp in enumerate(pole0):
         for sz in zero0:
             if abs(sp - sz) < _CANCEL_REL * abs(sp) and poles[i].undetermined:
