@@ -436,18 +436,21 @@ def _project(cov: np.ndarray, grads: list[np.ndarray]) -> np.ndarray:
     return 0.5 * (out + out.T)
 
 
-def _weak_text(comp: dict[str, float]) -> str:
+def _weak_text(comp: dict[str, float], scale: dict[str, float]) -> str:
+    """Words for a weak direction: what moves, and (for two parameters) what is determined.
+
+    Along δa = (c1 s1, c2 s2) the combination a1 − k a2 with k = c1 s1 / (c2 s2) stays put.
+    """
     names = list(comp)
     if len(names) == 1:
         return f"{names[0]} is not determined by this recording"
     if len(names) == 2:
         (n1, c1), (n2, c2) = comp.items()
-        kind = "ratio" if c1 * c2 > 0 else "product"
-        what = f"{n1}/{n2}" if kind == "ratio" else f"{n1}·{n2}"
-        return (f"{n1} and {n2} move together ({c1:+.2f}, {c2:+.2f} relative) without changing the fit: "
-                f"only about their {kind} ({what}) is determined")
+        k = c1 * scale[n1] / (c2 * scale[n2])
+        return (f"{n1} and {n2} move together ({c1:+.2f}, {c2:+.2f} of their size) without changing the fit: "
+                f"only {n1} {'−' if k > 0 else '+'} {abs(k):.3g}·{n2} is determined")
     moves = ", ".join(f"{k} {c:+.2f}" for k, c in comp.items())
-    return (f"{', '.join(names[:-1])} and {names[-1]} move together ({moves}, relative) without changing "
+    return (f"{', '.join(names[:-1])} and {names[-1]} move together ({moves} of their size) without changing "
             f"the fit: only combinations across that direction are determined")
 
 
@@ -589,7 +592,7 @@ def estimate_uncertainty(model: DriveModel, J: np.ndarray, r: np.ndarray, *, bou
             break
         vec = V[:, k] * np.sign(V[np.argmax(np.abs(V[:, k])), k])
         comp = {PARAMETER_NAMES[i]: float(vec[i]) for i in np.argsort(-np.abs(vec)) if abs(vec[i]) > 0.25}
-        weak.append(WeakDirection(comp, hw, _weak_text(comp)))
+        weak.append(WeakDirection(comp, hw, _weak_text(comp, dict(zip(PARAMETER_NAMES, scale)))))
 
     why = _equivalence_reasons(model, params, poles, zeros, pole0, zero0, weak, f_top)
     return Uncertainty(parameters=params, poles=poles, zeros=zeros, weak_directions=weak, covariance=cov,
