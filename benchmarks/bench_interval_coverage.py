@@ -5,12 +5,14 @@ The drive is the thesis's PID drive (Table 3.4, X, "Actual"), run by the model's
 discretisation (``ident.simulation.simulate``) on the command of the default identification
 programs (seed 7, through the virtual CNC's interpolator), so the truth is in the model
 class and only the noise is random: 0.5 µm AR(1) noise with correlation 0.9 per sample
-(integrated time 19 samples, like a closed loop's residual), 20 realisations (seeds
-100 … 119).  Each is identified as a user would (``ident.identify``, exact + refinement).
+(integrated time 19 samples, like a closed loop's residual), then white (correlation 0);
+20 realisations each (seeds 100 … 119).  Each is identified as a user would
+(``ident.identify``, exact + refinement, preview shift searched); the preview shifts it
+chose are printed: the intervals hold for the chosen shift.
 
     python benchmarks/bench_interval_coverage.py
 
-Prints, per parameter: coverage (of 20), the spread of the estimates divided by the mean
+Prints, per noise and parameter: coverage (of 20), the spread of the estimates divided by the mean
 standard error (1 = the intervals are as wide as they should be), and the mean half-width.
 """
 
@@ -40,25 +42,23 @@ def _ar1(n: int, rho: float, sigma: float, rng: np.random.Generator) -> np.ndarr
     return out
 
 
-def main() -> None:
-    cmd_rec = virtual_cnc.simulate(gcode_gen.generate(["X"], seed=7), "fadal-pid", seed=7)
-    xr = cmd_rec.axes["X"].commanded
-    x = simulate(PID_X, xr, cmd_rec.sample_period, segment=cmd_rec.segment)
-    wn, zeta, p = PID_X.search_variables()
-    truth = {**{k: getattr(PID_X, k) for k in PARAMETER_NAMES},
-             "wn_hz": wn / (2 * math.pi), "zeta": zeta, "p_hz": p / (2 * math.pi)}
+def _coverage(xr, x, cmd_rec, rho: float, truth: dict[str, float]) -> None:
     names = PARAMETER_NAMES + SEARCH_NAMES
     est, se, cover, half = ({k: [] for k in names} for _ in range(4))
+    shifts: dict[int, int] = {}
     for seed in range(100, 120):
-        noise = _ar1(x.size, 0.9, 0.5e-3, np.random.default_rng(seed))
+        noise = _ar1(x.size, rho, 0.5e-3, np.random.default_rng(seed))
         rec = Recording.from_arrays(cmd_rec.t, {"X": xr}, {"X": x + noise}, segment=cmd_rec.segment)
-        u = ident.identify(rec, diagnose=False).axes["X"].uncertainty
+        r = ident.identify(rec, diagnose=False).axes["X"]
+        shifts[r.shift] = shifts.get(r.shift, 0) + 1
         for k in names:
-            iv = u.parameters[k]
+            iv = r.uncertainty.parameters[k]
             est[k].append(iv.value)
             se[k].append(iv.se)
             cover[k].append(iv.lo <= truth[k] <= iv.hi)
             half[k].append((iv.hi - iv.lo) / 2)
+    print(f"\n0.5 µm AR(1) noise, correlation {rho} per sample; preview shifts chosen: "
+          + ", ".join(f"{s:+d} ({n}x)" for s, n in sorted(shifts.items())) + "\n")
     print("| quantity | true | covered (of 20) | spread / mean se | mean 95 % half-width |")
     print("|---|---|---|---|---|")
     for k in names:
@@ -66,6 +66,17 @@ def main() -> None:
         print(f"| {k} | {truth[k]:.4g} | {sum(cover[k])} | {ratio:.2f} | {np.mean(half[k]):.3g} |")
     total = sum(sum(c) for c in cover.values())
     print(f"\nall: {total} of {20 * len(names)} intervals cover the truth ({100 * total / (20 * len(names)):.1f} %)")
+
+
+def main() -> None:
+    cmd_rec = virtual_cnc.simulate(gcode_gen.generate(["X"], seed=7), "fadal-pid", seed=7)
+    xr = cmd_rec.axes["X"].commanded
+    x = simulate(PID_X, xr, cmd_rec.sample_period, segment=cmd_rec.segment)
+    wn, zeta, p = PID_X.search_variables()
+    truth = {**{k: getattr(PID_X, k) for k in PARAMETER_NAMES},
+             "wn_hz": wn / (2 * math.pi), "zeta": zeta, "p_hz": p / (2 * math.pi)}
+    for rho in (0.9, 0.0):
+        _coverage(xr, x, cmd_rec, rho, truth)
 
 
 if __name__ == "__main__":
