@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
@@ -231,8 +231,12 @@ def _intervals(model: DriveModel, rec: Recording, axis: str, shift: int, bounds:
         x0[sl.start] += h
         moved = FreeRun(free_run.x_r, Ts, segment=rec.segment, x0=x0)(model)
         J_start.append((moved - (r + tr.actual)) / h)
-    return model, estimate_uncertainty(model, J, r, bounds=bounds, sample_period=Ts, segment=rec.segment,
-                                       J_start=np.column_stack(J_start))
+    u = estimate_uncertainty(model, J, r, bounds=bounds, sample_period=Ts, segment=rec.segment,
+                             J_start=np.column_stack(J_start))
+    if not polish:
+        u = replace(u, method=u.method + "; at the equation-error model, which is not the output-error optimum "
+                    "(no refinement): the intervals are indicative only")
+    return model, u
 
 
 def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | None, against: Recording | None,
