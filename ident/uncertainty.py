@@ -23,6 +23,11 @@ that at least 5 n blocks remain.  Intervals are â ± t_{0.975, B−n} · se (St
 with the blocks as independent draws); ``effective_samples`` = N / τ is how many
 independent samples the recording is worth.
 
+The simulation starts each segment from the *recorded* position, so the noise of that one
+sample runs through the whole start transient (it moves the integrator and the friction
+offset together); its effect, (JᵀJ)⁻¹ Jᵀ J₀ σ² J₀ᵀ J (JᵀJ)⁻¹ with J₀ = ∂x̂/∂x̂(start) and
+σ² the residual variance, is added to the covariance.
+
 Derived quantities by the delta method (first-order propagation ∇g Cov ∇gᵀ, gradients
 by central differences): the search variables (ω_n, ζ, p) of eq. 3.7, every pole and
 zero (frequency in Hz, damping; roots matched to the estimate's by nearness).

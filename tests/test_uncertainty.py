@@ -123,3 +123,28 @@ def test_the_ppi_demo_drive_is_marked_an_equivalent_model():
     assert any({"d0", "d1"} <= set(w.components) for w in u.weak_directions)
     assert u.is_equivalent
     assert "Table 3.3" in u.equivalent_text()
+
+
+def test_summary_and_report_show_each_interval_and_mark(pid_drive, tmp_path):
+    """`agent identify` as a user runs it: every parameter, pole and zero with its interval
+    and mark in the terminal summary and the HTML report."""
+    import subprocess
+    import sys
+
+    from core.writer import write_recording_mcap
+
+    cmd, x = pid_drive
+    log = write_recording_mcap(Recording.from_arrays(cmd.t, {"X": cmd.x}, {"X": x + _ar1(x.size, 0.9, 0.5e-3, 2)}),
+                               tmp_path / "pid.mcap")
+    proc = subprocess.run([sys.executable, "-m", "agent.cli", "identify", str(log), "--no-diagnose",
+                           "--p-min-hz", "3", "--report", str(tmp_path / "r.html")],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    assert "95 % intervals" in out
+    rows = [line.split() for line in out.splitlines() if line.startswith("    ")]
+    named = {" ".join(w[:2]) if w[0] in ("pole", "zero") else w[0] for w in rows}
+    assert set(PARAMETER_NAMES + SEARCH_NAMES) | {"pole 1", "pole 2", "pole 3", "zero 1"} <= named
+    assert "at bound (p_min)" in out and "Equivalent model" in out
+    page = (tmp_path / "r.html").read_text()
+    assert "95 % interval" in page and "at bound (p_min)" in page and "Equivalent model" in page
