@@ -410,6 +410,29 @@ def _search_from_roots(poles: np.ndarray, pair: tuple[int, int], real: int) -> n
     return np.array([wn / _TWO_PI, zeta, -poles[real].real / _TWO_PI])
 
 
+def _near_pairs(roots: np.ndarray, rel: float = 0.1) -> list[tuple[int, int]]:
+    """Index pairs of roots closer than ``rel`` of their size (near-double roots)."""
+    out: list[tuple[int, int]] = []
+    used: set[int] = set()
+    for i in range(roots.size):
+        for j in range(i + 1, roots.size):
+            if i in used or j in used:
+                continue
+            if abs(roots[i] - roots[j]) < rel * max(abs(roots[i]), 1e-300):
+                out.append((i, j))
+                used |= {i, j}
+    return out
+
+
+def _pair_wz(s1: complex, s2: complex) -> tuple[float, float]:
+    """(ω_n Hz, ζ) of the quadratic with roots s1, s2: smooth in its coefficients."""
+    prod, tot = (s1 * s2).real, (s1 + s2).real
+    if prod <= 0.0:
+        return math.nan, math.nan
+    wn = math.sqrt(prod)
+    return wn / _TWO_PI, -tot / (2.0 * wn)
+
+
 def _pairing(poles: np.ndarray, wn: float, zeta: float, p: float) -> tuple[tuple[int, int], int]:
     """Which of the sorted poles are the pair (ω_n, ζ) and which the real pole p."""
     if not poles.size == 3:
@@ -516,9 +539,19 @@ def estimate_uncertainty(model: DriveModel, J: np.ndarray, r: np.ndarray, *, bou
     pole0 = _sorted_roots(model.denominator)
     pair, real = _pairing(pole0, wn, zeta, p)
 
+    # p one of two near-equal real poles, the other in the pair: which is which is not
+    # resolved (nor smooth): both are taken at their geometric mean, and the interval widened
+    # by the difference (below)
+    straddle = [pr for pr in _near_pairs(pole0) if real in pr and pole0.size == 3]
+
     def search_of(a: np.ndarray) -> np.ndarray:
         poles = _match(_sorted_roots(np.array([1.0, a[0], a[1], a[2]])), pole0)
-        return _search_from_roots(poles, pair, real) if poles.size == 3 else np.full(3, np.nan)
+        if poles.size != 3:
+            return np.full(3, np.nan)
+        for i, j in straddle:
+            w, _ = _pair_wz(poles[i], poles[j])
+            poles[i] = poles[j] = -_TWO_PI * w
+        return _search_from_roots(poles, pair, real)
 
     Gs = _gradient(search_of, v, h) if pole0.size == 3 else np.full((3, 8), np.nan)
     holds: dict[str, str] = {}
@@ -535,12 +568,12 @@ def estimate_uncertainty(model: DriveModel, J: np.ndarray, r: np.ndarray, *, bou
     cov = _project(cov, grads)
 
     def interval(value: float, g: np.ndarray | None, var: float | None = None, bound: str | None = None,
-                 size: float | None = None) -> Interval:
+                 size: float | None = None, extra: float = 0.0) -> Interval:
         if bound is not None:
             return Interval(value, value, value, 0.0, False, bound)
         var = float(g @ cov @ g) if var is None else var
         se = math.sqrt(max(var, 0.0)) if math.isfinite(var) else math.inf
-        hw = tq * se
+        hw = tq * se + extra
         wide = not hw < abs(value)
         small = size is not None and hw < 0.1 * size
         return Interval(value, value - hw, value + hw, se, bool(wide and not small), None, bool(wide and small))
@@ -552,8 +585,9 @@ def estimate_uncertainty(model: DriveModel, J: np.ndarray, r: np.ndarray, *, bou
     if bounds_hz is not None and bounds_hz.f_max_hz is not None:
         lo_, hi_ = bounds_hz.box()
         box_lo, box_hi = lo_ / [_TWO_PI, 1.0, _TWO_PI], hi_ / [_TWO_PI, 1.0, _TWO_PI]
+    smooth = search_of(v) if pole0.size == 3 else sv
     for i, k in enumerate(SEARCH_NAMES):
-        iv = interval(float(sv[i]), Gs[i], bound=holds.get(k))
+        iv = interval(float(sv[i]), Gs[i], bound=holds.get(k), extra=abs(float(sv[i] - smooth[i])))
         params[k] = replace(iv, lo=max(iv.lo, box_lo[i]), hi=min(iv.hi, box_hi[i]))
     f_top = float(box_hi[0]) if math.isfinite(box_hi[0]) else math.inf
 
@@ -562,13 +596,30 @@ def estimate_uncertainty(model: DriveModel, J: np.ndarray, r: np.ndarray, *, bou
         if nominal.size == 0:
             return []
         fd0 = _freq_damp(nominal)
-        G = _gradient(lambda a: _freq_damp(_match(_sorted_roots(coeff_of(a)), nominal)), v, h)
-        var = np.einsum("ij,jk,ik->i", G, cov, G)
         n = nominal.size
+        # Near a double root each root moves as the square root of a coefficient change and
+        # the delta method fails; such two roots are resolved as a pair: (ω_n, ζ) from their
+        # product and sum, which are smooth (see _near_pairs).
+        pairs = _near_pairs(nominal)
+
+        def fd(a: np.ndarray) -> np.ndarray:
+            roots = _match(_sorted_roots(coeff_of(a)), nominal)
+            out = _freq_damp(roots)
+            for i, j in pairs:
+                out[i], out[n + i] = _pair_wz(roots[i], roots[j])
+                out[j], out[n + j] = out[i], out[n + i]
+            return out
+
+        G = _gradient(fd, v, h)
+        var = np.einsum("ij,jk,ik->i", G, cov, G)
+        centre = fd(v)
         out = []
         for i in range(n):
             f, d = fd0[i], fd0[n + i]
             se_f, se_d = (math.sqrt(max(x, 0.0)) if math.isfinite(x) else math.inf for x in (var[i], var[n + i]))
+            if any(i in pr for pr in pairs):  # the pair's ω_n and ζ ranges, around this root
+                se_f += abs(f - centre[i]) / tq
+                se_d += abs(d - min(centre[n + i], 1.0)) / tq
             bound = at_bound_of(i)
             fi = (max(f - tq * se_f, 0.0), f + tq * se_f)
             di = (max(d - tq * se_d, -1.0), min(d + tq * se_d, 1.0))

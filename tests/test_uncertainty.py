@@ -148,3 +148,23 @@ def test_summary_and_report_show_each_interval_and_mark(pid_drive, tmp_path):
     assert "at bound (p_min)" in out and "Equivalent model" in out
     page = (tmp_path / "r.html").read_text()
     assert "95 % interval" in page and "at bound (p_min)" in page and "Equivalent model" in page
+
+
+def test_a_critically_damped_pair_gets_a_finite_interval():
+    """Two (nearly) equal poles move as the square root of the noise: each alone has no
+    useful linearisation, the pair (ω_n, ζ) has; the interval is the pair's and covers it."""
+    from ident.model import DriveModel
+
+    wn, p = 2 * math.pi * 30.0, 2 * math.pi * 2.0  # a double pole at 30 Hz (ζ = 1) and 2 Hz
+    a1, a2, a3 = p + 2 * wn, wn * wn + 2 * p * wn, p * wn * wn
+    truth = DriveModel(a1=a1, a2=a2, a3=a3, b0=0.0, b1=a1, b2=a2, d0=441.0, d1=-302.0)
+    cmd = point_to_point(20.0, TS, seed=3)
+    x = simulate(truth, cmd.x, TS) + _ar1(cmd.x.size, 0.9, 0.5e-3, 5)
+    u = _identify(cmd, x).axes["X"].uncertainty
+    fast = [pole for pole in u.poles if pole.freq_hz > 10.0]
+    assert len(fast) == 2
+    for pole in fast:
+        lo, hi = pole.freq_hz_interval95
+        assert not pole.undetermined and hi - lo < 0.2 * 30.0
+        assert lo <= 30.0 <= hi
+    assert u.parameters["wn_hz"].lo <= 30.0 <= u.parameters["wn_hz"].hi
