@@ -10,18 +10,21 @@ covariance σ²(JᵀJ)⁻¹ assumes independent residuals; an output-error resid
 noise and unmodelled dynamics pass through the closed loop and stay correlated over
 many samples, and σ²(JᵀJ)⁻¹ then understates the spread by about the correlation time
 (two to three times on the thesis's drives).  This module uses the covariance that holds
-for correlated residuals (the "sandwich" of a least-squares estimator)::
+for correlated residuals, the linearised delete-one-block jackknife::
 
-    Cov(â) = (JᵀJ)⁻¹ S (JᵀJ)⁻¹,     S = B/(B − n) Σ_b g_b g_bᵀ,     g_b = Σ_{k ∈ block b} J_kᵀ r_k
+    δ_b = (JᵀJ − J_bᵀJ_b)⁻¹ J_bᵀ r_b,        Cov(â) = (B − 1)/B Σ_b δ_b δ_bᵀ
 
-over B contiguous blocks of L samples (blocks never span a segment seam, n = 8
-parameters).  This is the batch-means (non-overlapping block) estimate of the score's
-long-run variance — the linearisation of a block bootstrap over the same blocks, exact
-to first order and deterministic.  L is chosen from the data: five integrated
+over B contiguous blocks of L samples (blocks never span a segment seam): δ_b is the
+Gauss–Newton move of the estimate when block b is left out.  It is the least-squares
+sandwich (JᵀJ)⁻¹ S (JᵀJ)⁻¹ with each block's score corrected for that block's own
+leverage (the CR3 cluster estimator) — the correction matters for friction, whose
+information sits in few blocks (reversals, segment starts) that the fit has already
+absorbed — and the linearisation of a block bootstrap/jackknife over the same blocks,
+deterministic.  L is chosen from the data: five integrated
 autocorrelation times of the scores J_k r_k (Sokal's automatic window, c = 5), capped so
-that at least 5 n blocks remain.  Intervals are â ± t_{0.975, B−n} · se (Student's t
-with the blocks as independent draws); ``effective_samples`` = N / τ is how many
-independent samples the recording is worth.
+that at least 5 n blocks remain (n = 8 parameters).  Intervals are â ± t_{0.975, B−n} · se
+(Student's t with the blocks as independent draws); ``effective_samples`` = N / τ is how
+many independent samples the recording is worth.
 
 The simulation starts each segment from the *recorded* position, so the noise of that one
 sample runs through the whole start transient (it moves the integrator and the friction
@@ -201,8 +204,8 @@ class Uncertainty:
     residual_rms_mm: float
     is_equivalent: bool
     why: list[str] = field(default_factory=list)
-    method: str = ("output-error Gauss-Newton covariance, block sandwich (batch means) for correlated "
-                   "residuals; delta method for derived quantities")
+    method: str = ("output-error Gauss-Newton covariance, linearised delete-one-block jackknife for "
+                   "correlated residuals; delta method for derived quantities")
 
     @property
     def undetermined(self) -> list[str]:
@@ -354,17 +357,26 @@ def _blocks(n: int, L: int, segment: np.ndarray | None) -> list[slice]:
 
 
 def _sandwich(J: np.ndarray, r: np.ndarray, segment: np.ndarray | None) -> tuple[np.ndarray, int, int, float]:
-    """(JᵀJ)⁻¹ S (JᵀJ)⁻¹ in the scaled parameters, with L, B and τ (module docstring)."""
+    """Block-jackknife covariance in the scaled parameters, with L, B and τ (module docstring).
+
+    Leaving block b out moves the Gauss–Newton estimate by δ_b = (A − J_bᵀJ_b)⁻¹ J_bᵀ r_b
+    (A = JᵀJ); the covariance is (B − 1)/B Σ_b δ_b δ_bᵀ.  This is the sandwich
+    A⁻¹ S A⁻¹ with each block's score J_bᵀ r_b corrected for the block's own leverage —
+    without it a parameter whose information sits in few blocks (friction: reversals and
+    segment starts) gets a variance too small, because the fit has already absorbed most
+    of those blocks' residual.
+    """
     n, p = J.shape
     scores = J * r[:, None]
     L, tau = block_length(scores, p)
     blocks = _blocks(n, L, segment)
-    G = np.array([scores[b].sum(axis=0) for b in blocks])
     B = len(blocks)
-    S = G.T @ G * (B / max(B - p, 1))
     A = J.T @ J
-    Ainv = np.linalg.pinv(A, rcond=1e-14, hermitian=True)
-    cov = Ainv @ S @ Ainv
+    D = np.empty((B, p))
+    for i, b in enumerate(blocks):
+        Jb = J[b]
+        D[i] = np.linalg.lstsq(A - Jb.T @ Jb, scores[b].sum(axis=0), rcond=1e-14)[0]
+    cov = D.T @ D * ((B - 1) / B)
     return 0.5 * (cov + cov.T), L, B, tau
 
 
