@@ -14,7 +14,9 @@ chose are printed: the intervals hold for the chosen shift.
     python benchmarks/bench_interval_coverage.py
 
 Prints, per noise and parameter: coverage (of 20), the spread of the estimates divided by the mean
-standard error (1 = the intervals are as wide as they should be), and the mean half-width.
+standard error (1 = the intervals are as wide as they should be), the first-order standard
+error computed with the known noise covariance divided by the mean standard error (1 = the
+estimator does what linear theory can), and the mean half-width.
 """
 
 from __future__ import annotations
@@ -22,14 +24,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.signal import lfilter
 
 import gcode_gen
 import ident
 import virtual_cnc
 from core.recording import Recording
 from ident.model import DriveModel
-from ident.simulation import simulate
-from ident.uncertainty import PARAMETER_NAMES, SEARCH_NAMES
+from ident.simulation import FreeRun, simulate
+from ident.uncertainty import PARAMETER_NAMES, SEARCH_NAMES, output_error_jacobian
 
 PID_X = DriveModel(a1=192.65, a2=44356.23, a3=316830.21, b0=0.0, b1=190.10, b2=44356.23, d0=441.0, d1=-302.0)
 
@@ -43,8 +46,20 @@ def _ar1(n: int, rho: float, sigma: float, rng: np.random.Generator) -> np.ndarr
     return out
 
 
+def _linear_theory_se(xr, x, cmd_rec, rho: float, sigma: float) -> np.ndarray:
+    """Standard errors of a1 … d1 from first-order theory with the *known* noise covariance:
+    (JᵀJ)⁻¹ JᵀΣJ (JᵀJ)⁻¹, Σ of the AR(1) noise (JᵀΣJ through the filter's adjoint), J at the truth."""
+    fr = FreeRun(xr, cmd_rec.sample_period, segment=cmd_rec.segment, x0=x)
+    J, _ = output_error_jacobian(fr, PID_X, x)
+    AtJ = lfilter([1.0], [1.0, -rho], J[::-1], axis=0)[::-1]
+    Ainv = np.linalg.inv(J.T @ J)
+    cov = Ainv @ (AtJ.T @ AtJ * sigma ** 2 * (1 - rho ** 2)) @ Ainv
+    return np.sqrt(np.diag(cov))
+
+
 def _coverage(xr, x, cmd_rec, rho: float, truth: dict[str, float]) -> None:
     names = PARAMETER_NAMES + SEARCH_NAMES
+    theory = dict(zip(PARAMETER_NAMES, _linear_theory_se(xr, x, cmd_rec, rho, 0.5e-3)))
     est, se, cover, half = ({k: [] for k in names} for _ in range(4))
     shifts: dict[int, int] = {}
     for seed in range(300, 320):
@@ -60,11 +75,13 @@ def _coverage(xr, x, cmd_rec, rho: float, truth: dict[str, float]) -> None:
             half[k].append((iv.hi - iv.lo) / 2)
     print(f"\n0.5 µm AR(1) noise, correlation {rho} per sample; preview shifts chosen: "
           + ", ".join(f"{s:+d} ({n}x)" for s, n in sorted(shifts.items())) + "\n")
-    print("| quantity | true | covered (of 20) | spread / mean se | mean 95 % half-width |")
-    print("|---|---|---|---|---|")
+    print("| quantity | true | covered (of 20) | spread / mean se | linear-theory se / mean se "
+          "| mean 95 % half-width |")
+    print("|---|---|---|---|---|---|")
     for k in names:
         ratio = np.std(est[k], ddof=1) / np.mean(se[k])
-        print(f"| {k} | {truth[k]:.4g} | {sum(cover[k])} | {ratio:.2f} | {np.mean(half[k]):.3g} |")
+        th = f"{theory[k] / np.mean(se[k]):.2f}" if k in theory else "–"
+        print(f"| {k} | {truth[k]:.4g} | {sum(cover[k])} | {ratio:.2f} | {th} | {np.mean(half[k]):.3g} |")
     total = sum(sum(c) for c in cover.values())
     print(f"\nall: {total} of {20 * len(names)} intervals cover the truth ({100 * total / (20 * len(names)):.1f} %)")
 
