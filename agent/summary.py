@@ -12,11 +12,22 @@ import math
 import typer
 
 from ident.headline import axis_headline, comparison_words, term_notes
-from ident.results import IdentifyResult
+from ident.results import AxisResult, IdentifyResult
 
 
 def _fmt(v: float) -> str:
     return "n/a" if v is None or not math.isfinite(v) else f"{v:.6g}"
+
+
+def _print_intervals(r: AxisResult) -> None:
+    """95 % intervals with their 'at bound' / 'not determined' marks, and the equivalent-model verdict."""
+    u = r.uncertainty
+    if u is None:
+        return
+    typer.echo("  95 % intervals (output-error fit, correlated residual accounted for):")
+    for name, value, interval, mark in u.rows():
+        typer.echo(f"    {name:8s} {value:>24s}  {interval}" + (f"  {mark}" if mark else ""))
+    typer.echo("  " + u.equivalent_text())
 
 
 def print_summary(result: IdentifyResult) -> None:
@@ -41,6 +52,7 @@ def print_summary(result: IdentifyResult) -> None:
         echo("  poles:  " + "; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.poles()))
         echo("  zeros:  " + ("; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.zeros()) or "none"))
         echo("  active constraints: " + (", ".join(r.active_constraints) or "none"))
+        _print_intervals(r)
         for note in term_notes(r):
             echo(f"  note: {note}")
         fi = r.fit_identification

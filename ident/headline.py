@@ -203,9 +203,11 @@ def term_notes(r: AxisResult) -> list[str]:
         notes.append(_shift_words(r)[0].upper() + _shift_words(r)[1:] + ". The model is fitted and simulated with "
                      "this shift; the frequency-response plot includes it.")
     f_max = r.bounds.f_max_hz_for(r.sample_period)
-    at_bound = [f for f, _ in r.model.poles() if f_max and abs(f - f_max) < 1e-3 * f_max]
+    # eq. 3.8 bounds ω_n, so an over-damped pair can put one real pole beyond f_max: neither is determined
+    at_bound = [f for f, _ in r.model.poles() if f_max and f > (1 - 1e-3) * f_max]
     if at_bound:
-        notes.append(f"A pole at {at_bound[0]:.4g} Hz sits on the upper bound f_max = {f_max:.4g} Hz (the Nyquist "
+        where = "sits on" if at_bound[0] < (1 + 1e-3) * f_max else "lies beyond"
+        notes.append(f"A pole at {at_bound[0]:.4g} Hz {where} the upper bound f_max = {f_max:.4g} Hz (the Nyquist "
                      f"frequency unless set): the recording does not determine it — it stands for “faster than the "
                      f"data can show”. The model is then an equivalent of the drive over the frequencies the "
                      f"commands contain, not its physical parameters (the thesis's P-PI drive, Table 3.3, showed "

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
@@ -28,7 +28,10 @@ from ident.preprocessing import prepare_recording
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
 from ident.results import AxisResult, AxisTraces, ContourResult, IdentifyResult
+from ident.simulation import FreeRun
+from ident.preprocessing import segment_slices, shift_command
 from ident.solvers import solve, solve_ls
+from ident.uncertainty import Uncertainty, estimate_uncertainty, output_error_jacobian, stationary_point
 
 if TYPE_CHECKING:  # the diagnosis is imported when used: it is most of ident's import time
     from ident.diagnosis.config import DiagnosisConfig
@@ -159,6 +162,12 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         model = refined.model
         timings["refinement"] = time.perf_counter() - t0
 
+    uncertainty = None
+    if prior is None:
+        t0 = time.perf_counter()
+        model, uncertainty = _intervals(model, rec, axis, reg.shift, opts.bounds, polish=refined is not None)
+        timings["intervals"] = time.perf_counter() - t0
+
     t0 = time.perf_counter()
     x_hat = _free_run(model, rec, axis, reg.shift)
     fit_id = fit_result(tr.commanded - tr.actual, tr.commanded - x_hat)
@@ -186,10 +195,48 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         bounds=opts.bounds, sample_period=Ts, shift=reg.shift,
         fit_identification=fit_id, fit_validation=fit_val, fit_constrained=fit_eq, fit_unconstrained=fit_ls,
         unconstrained_note=_ls_note(ls.model, opts.bounds, Ts, fit_ls, fit_id, rec.duration),
-        diagnosis=diagnosis, timings=timings,
+        diagnosis=diagnosis, timings=timings, uncertainty=uncertainty,
         traces=AxisTraces(rec.t, tr.commanded, tr.actual, x_hat, rec.segment),
         validation_traces=val_traces,
     )
+
+
+def _intervals(model: DriveModel, rec: Recording, axis: str, shift: int, bounds: Bounds,
+               polish: bool) -> tuple[DriveModel, Uncertainty | None]:
+    """95 % intervals of the model from its output-error Jacobian (:mod:`ident.uncertainty`).
+
+    After the output-error refinement (``polish``) the model is first taken to the
+    stationary point of the cost on every sample, where the covariance holds.  Without
+    refinement the intervals are those of the output-error cost at the equation-error
+    model.  None when the free run of the model is not finite (no interval can be given).
+    """
+    tr = rec.axes[axis]
+    Ts = rec.sample_period
+    free_run = FreeRun(shift_command(tr.commanded, shift, rec.segment), Ts, segment=rec.segment, x0=tr.actual)
+    with np.errstate(all="ignore"):
+        try:
+            if polish:
+                model, J, r = stationary_point(free_run, model, tr.actual, bounds=bounds, sample_period=Ts)
+            else:
+                J, r = output_error_jacobian(free_run, model, tr.actual)
+        except (FloatingPointError, ValueError, OverflowError):
+            return model, None
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(r))):
+        return model, None
+    # response to each segment's start position (the recorded one, noise included)
+    h = 1e-4  # mm
+    J_start = []
+    for sl in segment_slices(rec.segment, tr.actual.size):
+        x0 = tr.actual.copy()
+        x0[sl.start] += h
+        moved = FreeRun(free_run.x_r, Ts, segment=rec.segment, x0=x0)(model)
+        J_start.append((moved - (r + tr.actual)) / h)
+    u = estimate_uncertainty(model, J, r, bounds=bounds, sample_period=Ts, segment=rec.segment,
+                             J_start=np.column_stack(J_start))
+    if not polish:
+        u = replace(u, method=u.method + "; at the equation-error model, which is not the output-error optimum "
+                    "(no refinement): the intervals are indicative only")
+    return model, u
 
 
 def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | None, against: Recording | None,

@@ -225,6 +225,22 @@ def _param_text(v) -> str:
     return str(v)
 
 
+def _interval_section(r: AxisResult) -> str:
+    """The search variables with their 95 % interval and mark, and whether the model is an equivalent one
+    (the intervals of eq. 3.3's parameters, poles and zeros are in their own tables)."""
+    u = r.uncertainty
+    if u is None:
+        return ""
+    verdict = "equivalent" if u.is_equivalent else "physical"
+    rows = [row for row in u.rows() if row[0] in u.parameters and row[0] not in _PARAM_MEANING]
+    return ("<h3>Search variables (95 % intervals) and what the model is</h3>"
+            + table(rows, header=("quantity", "value", "95 % interval", "mark"))
+            + f"<p class='{verdict}'>{html.escape(u.equivalent_text())}</p>"
+            + f"<p>Intervals from the output-error fit's Jacobian; the residual is correlated, so "
+              f"{u.n_samples} samples count as about {u.effective_samples:.0f} independent ones "
+              f"(blocks of {u.block_length} samples).</p>")
+
+
 def _f(v, scale: float = 1.0, fmt: str = ".3g") -> str:
     return "n/a" if v is None or not isinstance(v, (int, float)) or not math.isfinite(v) else format(v * scale, fmt)
 
@@ -282,26 +298,42 @@ _PARAM_MEANING = {
 
 
 def _parameter_table(r: AxisResult) -> str:
-    """eq. 3.3's parameters, one row each (a grid, so further columns such as an interval fit)."""
-    m = r.model
-    rows = [(k, _g(getattr(m, k)), _PARAM_MEANING[k]) for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")]
-    return table(rows, ("parameter (eq. 3.3)", "value", "meaning"))
+    """eq. 3.3's parameters, one row each, with their 95 % interval and mark when the fit gave one."""
+    m, u = r.model, r.uncertainty
+    rows = []
+    for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1"):
+        row = (k, _g(getattr(m, k)))
+        if u is not None and k in u.parameters:
+            iv = u.parameters[k]
+            row += (f"[{_g(iv.lo)}, {_g(iv.hi)}]", iv.mark())
+        rows.append(row + (_PARAM_MEANING[k],))
+    header = ("parameter (eq. 3.3)", "value") + (("95 % interval", "mark") if u is not None else ()) + ("meaning",)
+    return table(rows, header)
 
 
 def _roots_table(r: AxisResult) -> str:
+    """Poles and zeros with what each means for the machine, and their 95 % interval when there is one."""
     f_max = r.bounds.f_max_hz_for(r.sample_period)
+    u = r.uncertainty
     rows = []
-    for kind, roots in (("pole", r.model.poles()), ("zero", r.model.zeros())):
-        for f, z in roots:
+    for kind, roots, ivs in (("pole", r.model.poles(), u.poles if u else []),
+                             ("zero", r.model.zeros(), u.zeros if u else [])):
+        for i, (f, z) in enumerate(roots):
             note = ""
-            if kind == "pole" and f_max and abs(f - f_max) < 1e-3 * f_max:
-                note = "at the f_max bound: not determined by the data"
+            if kind == "pole" and f_max and f > (1 - 1e-3) * f_max:
+                note = "at or beyond the f_max bound: not determined by the data"
             elif z < 0:
                 note = "right half-plane (non-minimum phase)"
             elif abs(z - 1.0) < 1e-9:
                 note = "real"
-            rows.append((kind, f"{f:.4g}", f"{z:.2f}", note))
-    return table(rows, ("", "frequency (Hz)", "damping ζ", "note"))
+            row = (kind, f"{f:.4g}", f"{z:.2f}")
+            if u is not None:
+                iv = ivs[i] if i < len(ivs) else None
+                row += (("[{}, {}] Hz, ζ [{:.2f}, {:.2f}]".format(_g(iv.freq_hz_interval95[0]), _g(iv.freq_hz_interval95[1]),
+                                                                  *iv.damping_interval95), iv.mark()) if iv else ("", ""))
+            rows.append(row + (note,))
+    header = ("", "frequency (Hz)", "damping ζ") + (("95 % interval", "mark") if u is not None else ()) + ("note",)
+    return table(rows, header)
 
 
 def _axis_section(r: AxisResult, result: IdentifyResult) -> str:
@@ -328,6 +360,7 @@ def _axis_section(r: AxisResult, result: IdentifyResult) -> str:
     notes = term_notes(r)
     if notes:
         parts.append("<ul>" + "".join(f"<li>{html.escape(n)}</li>" for n in notes) + "</ul>")
+    parts.append(_interval_section(r))
     parts.append("<h3>What unconstrained least squares gives, and why the constraints matter</h3>")
     parts.append(f"<p>{html.escape(r.unconstrained_note)}</p>")
     parts.append(_bode(r))

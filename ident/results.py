@@ -14,6 +14,7 @@ from ident.metrics import FitResult
 from ident.model import Bounds, DriveModel
 from ident.refine import RefineResult
 from ident.solvers.common import SolverResult
+from ident.uncertainty import Uncertainty
 
 __all__ = ["AxisTraces", "AxisResult", "ContourResult", "IdentifyResult", "RESULT_FORMAT"]
 
@@ -58,6 +59,8 @@ class AxisResult:
     timings: dict[str, float] = field(default_factory=dict)
     traces: AxisTraces | None = None
     validation_traces: AxisTraces | None = None
+    #: 95 % intervals of the final model (None for a model given with ``--model``)
+    uncertainty: Uncertainty | None = None
 
     @property
     def base_model(self) -> AxisModel:
@@ -96,6 +99,8 @@ class AxisResult:
 
     def to_dict(self) -> dict[str, Any]:
         out = self.model.to_dict(self.bounds, self.sample_period)
+        if self.uncertainty is not None:
+            _add_intervals(out, self.uncertainty)
         out["solver"] = self.constrained.solver
         out["refined"] = self.refined is not None
         out["active_constraints"] = list(self.active_constraints)
@@ -192,6 +197,24 @@ class IdentifyResult:
     def models(self) -> dict[str, DriveModel]:
         """The final drive model of each axis."""
         return {name: r.model for name, r in self.axes.items()}
+
+
+def _add_intervals(out: dict[str, Any], u: Uncertainty) -> None:
+    """Intervals beside SPEC's keys: ``model_interval95`` etc., and per pole/zero entries.
+
+    The SPEC keys ("model", "poles", "zeros", "search_variables") keep their meaning; each
+    pole and zero dict gains ``freq_hz_interval95``, ``damping_interval95``, ``at_bound``
+    and ``undetermined`` (same order as :meth:`DriveModel.poles`).
+    """
+    d = u.to_dict()
+    for key in ("poles", "zeros"):
+        extra = d.pop(key)
+        if len(extra) == len(out[key]):
+            out[key] = [{**base, **{k: v for k, v in e.items() if k not in ("freq_hz", "damping")}}
+                        for base, e in zip(out[key], extra)]
+    out["intervals"] = {k: d.pop(k) for k in ("method", "samples", "residual_rms_mm", "standard_error",
+                                                "weak_directions")}
+    out.update(d)
 
 
 def _identified_range(tr: AxisTraces) -> dict[str, Any]:
