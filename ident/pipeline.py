@@ -24,6 +24,7 @@ from ident.axis_model import AxisModel
 from ident.contour import contour_error
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel
+from ident.plausibility import check_identifiable
 from ident.preprocessing import prepare_recording
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
@@ -260,6 +261,7 @@ def identify(
     ga_generations: int = 500,
     progress: Callable[[str], None] | None = None,
     diagnosis_config: "DiagnosisConfig | None" = None,
+    units: str = "auto",
 ) -> IdentifyResult:
     """Identify the drive model of every (or each chosen) axis of a recording.
 
@@ -280,6 +282,9 @@ def identify(
     progress : called with a short description of each diagnosis stage (a progress line).
     diagnosis_config : an :class:`ident.diagnosis.config.DiagnosisConfig` (its tunables, e.g.
         for a benchmark's sweep); default its documented values.
+    units : positions in "mm", in "m" (converted), or "auto": metres recorded in the metadata
+        are converted, values that only look like metres are refused
+        (:func:`ident.plausibility.check_identifiable`, which every recording passes first).
 
     Returns
     -------
@@ -297,9 +302,10 @@ def identify(
     # The fits solve thousands of 3x3..9x9 systems: a multi-threaded BLAS would spend
     # more on hand-offs between threads than on the arithmetic.
     with threadpool_limits(limits=1, user_api="blas"):
-        rec = prepare_recording(_as_recording(recording, "recording"))
+        rec = prepare_recording(_as_recording(recording, "recording"), check_units=False)
         names = _pick_axes(rec, axes)
-        val = prepare_recording(_as_recording(validate, "validate")) if validate is not None else None
+        rec = check_identifiable(rec, names, units=units)
+        val = prepare_recording(_as_recording(validate, "validate"), check_units=False) if validate is not None else None
         if val is not None:
             missing = [a for a in names if a not in val.axes]
             if missing:
@@ -309,6 +315,7 @@ def identify(
                 raise RecordingError.about(
                     "validate", f"validation recording {_name(val, '')}: sample period {val.sample_period * 1e3:.4g} "
                     f"ms differs from the recording's {rec.sample_period * 1e3:.4g} ms")
+            val = check_identifiable(val, names, units=units)
         sim = _as_recording(against, "against") if against is not None else None
         priors = dict(prior or {})
         for a in names:

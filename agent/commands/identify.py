@@ -25,6 +25,9 @@ def identify(
     zeta_min: float = typer.Option(0.2, "--zeta-min", help="Lower bound on the pair's damping ratio."),
     zeta_max: float = typer.Option(2.0, "--zeta-max", help="Upper bound on the pair's damping ratio."),
     f_max_hz: Optional[float] = typer.Option(None, "--f-max-hz", help="Upper bound on pole frequencies, Hz (default Nyquist)."),
+    units: str = typer.Option("auto", "--units", help="Units of the recorded positions: mm, m (converted), or auto "
+                                                       "(metres in the log's metadata are converted; values that only "
+                                                       "look like metres are refused)."),
     seed: int = typer.Option(0, "--seed", help="Seed of the genetic algorithm and of the diagnosis cross-validation."),
     ga_population: int = typer.Option(4000, "--ga-population", help="GA population size (thesis: 4000)."),
     ga_generations: int = typer.Option(500, "--ga-generations", help="GA generations (thesis: 500)."),
@@ -47,7 +50,7 @@ def identify(
             axes=axes or None, solver=solver, diagnose=diagnose, refine=refine, seed=seed,
             bounds=Bounds(p_min_hz=p_min_hz, wn_min_hz=wn_min_hz, zeta_min=zeta_min, zeta_max=zeta_max,
                           f_max_hz=f_max_hz),
-            ga_population=ga_population, ga_generations=ga_generations, progress=progress,
+            ga_population=ga_population, ga_generations=ga_generations, progress=progress, units=units.strip().lower(),
         )
     print_summary(result)
     for path in (json_out, report):

@@ -1,0 +1,119 @@
+"""Bad input through the real `agent` command: one `error:` line naming the problem in the user's
+terms, exit 2, no traceback, and nothing written on a failed run (issue 43's list, one test each)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from core.reader import load_recording
+from core.recording import AxisTrace, Recording
+from core.writer import write_recording_csv
+
+AGENT = [sys.executable, "-m", "agent.cli"]
+
+
+def agent(*args, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run([*AGENT, *map(str, args)], capture_output=True, text=True, timeout=300, **kw)
+
+
+def refused(proc: subprocess.CompletedProcess, *words: str) -> str:
+    """The run failed as bad input: exit 2, one `error:` line holding ``words``, no traceback."""
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    assert "Traceback" not in proc.stderr + proc.stdout
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def work(tmp_path_factory) -> Path:
+    """Identification programs and their recording on the default virtual machine (5 s, axis X)."""
+    d = tmp_path_factory.mktemp("bad_input")
+    assert agent("generate", "--axes", "X", "--n-low", 40, "--n-high", 40, "-o", d / "prog").returncode == 0
+    assert agent("simulate", d / "prog/ident_low.nc", d / "prog/ident_high.nc", "-o", d / "run.mcap").returncode == 0
+    return d
+
+
+@pytest.fixture(scope="module")
+def run(work) -> Recording:
+    return load_recording(work / "run.mcap")
+
+
+def _csv(path: Path, rec: Recording, commanded=None, actual=None, t=None, n: int | None = None) -> Path:
+    tr = rec.axes["X"]
+    c = tr.commanded if commanded is None else commanded
+    a = tr.actual if actual is None else actual
+    tt = rec.t if t is None else t
+    seg = rec.segment
+    if n is not None:
+        c, a, tt, seg = c[1000:1000 + n], a[1000:1000 + n], tt[:n], None
+    return write_recording_csv(Recording(tt, {"X": AxisTrace(c, a)}, rec.sample_period, segment=seg), path)
+
+
+# --------------------------------------------------------------------------- recordings no model comes from
+
+
+def test_no_motion_says_the_axis_does_not_move(tmp_path):
+    rec = Recording(np.arange(3000) * 1e-3, {"X": AxisTrace(np.full(3000, 3.0), np.full(3000, 3.0))}, 1e-3)
+    refused(agent("identify", write_recording_csv(rec, tmp_path / "still.csv"), "--no-diagnose"),
+            "no motion on axis X")
+
+
+def test_actual_equal_to_commanded_says_there_is_no_tracking_error(tmp_path, run):
+    path = _csv(tmp_path / "same.csv", run, actual=run.axes["X"].commanded)
+    refused(agent("identify", path, "--no-diagnose", "--json", tmp_path / "r.json"),
+            "actual position equals the commanded position", "no tracking error")
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_a_constant_offset_says_so(tmp_path, run):
+    path = _csv(tmp_path / "offset.csv", run, actual=run.axes["X"].commanded + 0.5)
+    refused(agent("identify", path, "--no-diagnose"), "commanded position plus a constant 0.5 mm")
+
+
+@pytest.mark.parametrize("n, seconds", [(20, "0.019 s"), (200, "0.199 s")])
+def test_a_recording_too_short_to_identify_is_refused(tmp_path, run, n, seconds):
+    refused(agent("identify", _csv(tmp_path / "short.csv", run, n=n), "--no-diagnose"),
+            f"only {seconds} ({n} samples) long", "at least 1 s")
+
+
+def test_one_direction_only_says_it_never_reverses(tmp_path):
+    x_r = np.linspace(0, 10, 2000)
+    rec = Recording(np.arange(2000) * 1e-3, {"X": AxisTrace(x_r, x_r - 0.01 * np.tanh(np.arange(2000) / 50))}, 1e-3)
+    refused(agent("identify", write_recording_csv(rec, tmp_path / "oneway.csv"), "--no-diagnose"),
+            "never reverses direction", "positive direction only")
+
+
+def test_time_in_milliseconds_is_refused(tmp_path, run):
+    refused(agent("identify", _csv(tmp_path / "ms.csv", run, t=run.t * 1e3), "--no-diagnose"),
+            "one sample every 1 s", "milliseconds")
+
+
+def test_commanded_and_actual_swapped_is_refused(tmp_path, run):
+    tr = run.axes["X"]
+    refused(agent("identify", _csv(tmp_path / "swapped.csv", run, commanded=tr.actual, actual=tr.commanded),
+                  "--no-diagnose"), "actual position leads the commanded position", "swapped")
+
+
+def test_a_prediction_log_is_not_identified(tmp_path, work):
+    result = tmp_path / "r.json"
+    assert agent("identify", work / "run.mcap", "--no-diagnose", "--no-refine", "--json", result).returncode == 0
+    pred = tmp_path / "pred.mcap"
+    assert agent("simulate", work / "prog/ident_low.nc", "--machine", result, "-o", pred).returncode == 0
+    refused(agent("identify", pred, "--no-diagnose"), "is a prediction", "not measured")
+
+
+def test_metres_are_refused_unless_the_units_are_given(tmp_path, run):
+    tr = run.axes["X"]
+    path = _csv(tmp_path / "metres.csv", run, commanded=tr.commanded * 1e-3, actual=tr.actual * 1e-3)
+    refused(agent("identify", path, "--no-diagnose"), "--units", "look like metres")
+    ok = agent("identify", path, "--no-diagnose", "--no-refine", "--units", "m")
+    assert ok.returncode == 0, ok.stderr
+    assert "0.00 µm" not in ok.stdout
