@@ -18,21 +18,34 @@ def print_summary(result: IdentifyResult) -> None:
     echo(f"recording {result.source}" + (f", validated on {result.validation_source}" if result.validation_source else ""))
     for name, r in result.axes.items():
         m = r.model
-        echo(f"\naxis {name}: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
-             + f", preview shift {r.shift} sample(s)")
+        if r.prior_source:
+            echo(f"\naxis {name}: the model of {r.prior_source} as it was identified (preview shift {r.shift} "
+                 "sample(s)), scored on this recording; not re-identified")
+        else:
+            echo(f"\naxis {name}: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
+                 + f", preview shift {r.shift} sample(s)")
         echo("  model (eq. 3.3): " + ", ".join(f"{k}={_fmt(getattr(m, k))}" for k in
                                                  ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")))
         echo("  poles:  " + "; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.poles()))
         echo("  zeros:  " + ("; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.zeros()) or "none"))
-        echo("  active constraints: " + (", ".join(r.active_constraints) or "none"))
+        if r.prior_source:
+            pass  # the constraints of a fit made elsewhere are in that file's JSON
+        elif r.constrained.solver == "ls":
+            outside = r.bounds.check(m, r.sample_period)
+            echo("  constraints: none applied (solver ls, unconstrained)"
+                 + (f"; outside the bounds: {', '.join(outside)} (poles up to "
+                    f"{r.bounds.f_max_hz_for(r.sample_period):g} Hz allowed)" if outside else ""))
+        else:
+            echo("  active constraints: " + (", ".join(r.active_constraints) or "none"))
         fi = r.fit_identification
         line = f"  tracking-error fit: identification {fi.tracking_error_fit_pct:.2f} % (prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm)"
         if r.fit_validation is not None:
             fv = r.fit_validation
             line += f", validation {fv.tracking_error_fit_pct:.2f} % (prediction error rms {fv.tracking_error_rms_mm * 1e3:.2f} µm)"
         echo(line)
-        echo(f"  equation-error model before refinement: {r.fit_constrained.tracking_error_fit_pct:.2f} %")
-        echo(f"  unconstrained LS: {r.unconstrained_note}")
+        if not r.prior_source:
+            echo(f"  equation-error model before refinement: {r.fit_constrained.tracking_error_fit_pct:.2f} %")
+            echo(f"  unconstrained LS: {r.unconstrained_note}")
         if r.diagnosis is not None:
             echo("  diagnosis: " + r.diagnosis.summary)
         echo("  time: " + ", ".join(f"{k} {v:.2f} s" for k, v in r.timings.items()))

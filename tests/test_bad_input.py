@@ -3,6 +3,7 @@ terms, exit 2, no traceback, and nothing written on a failed run (issue 43's lis
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -117,3 +118,127 @@ def test_metres_are_refused_unless_the_units_are_given(tmp_path, run):
     ok = agent("identify", path, "--no-diagnose", "--no-refine", "--units", "m")
     assert ok.returncode == 0, ok.stderr
     assert "0.00 µm" not in ok.stdout
+
+
+# --------------------------------------------------------------------------- result JSONs and --set
+
+
+@pytest.fixture(scope="module")
+def result(work) -> Path:
+    """The identified machine of the fixture recording (agent identify --json)."""
+    path = work / "result.json"
+    proc = agent("identify", work / "run.mcap", "--no-diagnose", "--json", path)
+    assert proc.returncode == 0, proc.stderr
+    return path
+
+
+def test_a_json_list_is_not_a_rapid_ident_result(tmp_path, work):
+    other = tmp_path / "other.json"
+    other.write_text("[1, 2, 3]")
+    refused(agent("identify", work / "run.mcap", "--model", other), "--model", "not a rapid-ident result")
+    refused(agent("predict", work / "prog/ident_low.nc", "--machine", other), "not a rapid-ident result")
+
+
+def test_another_tools_json_is_not_called_an_older_rapid_ident(tmp_path, work):
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"tool": "servo-tuner", "axes": {"X": {"kp": 20}}}))
+    line = refused(agent("predict", work / "prog/ident_low.nc", "--machine", other), "not a rapid-ident result")
+    assert "older" not in line
+
+
+def test_an_effect_given_as_a_string_is_named(tmp_path, work, result):
+    doc = json.loads(result.read_text())
+    doc["axes"]["X"]["virtual_model"]["effects"] = {"backlash": "0.01"}
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(doc))
+    refused(agent("predict", work / "prog/ident_low.nc", "--machine", bad), "axis X", "effect backlash",
+            "name: value pairs")
+    doc["axes"]["X"]["virtual_model"]["effects"] = {"backlash": {"gap_mm": "0.01"}}
+    bad.write_text(json.dumps(doc))
+    refused(agent("predict", work / "prog/ident_low.nc", "--machine", bad), "backlash gap_mm must be a finite number")
+
+
+@pytest.mark.parametrize("assignment, words", [
+    ("X.a1=-3000", ["'X.a1=-3000'", "unstable", "right half-plane"]),
+    ("X.a1=1e30", ["'X.a1=1e30'", "never move"]),
+])
+def test_set_refuses_a_model_that_cannot_run(tmp_path, work, result, assignment, words):
+    json_out = tmp_path / "p.json"
+    refused(agent("predict", work / "prog/ident_low.nc", "--machine", result, "--set", assignment,
+                  "--json", json_out), *words)
+    assert not json_out.exists()
+
+
+def test_effect_parameters_are_checked_the_same_way_by_set_and_effect(tmp_path, work, result):
+    via_set = refused(agent("predict", work / "prog/ident_low.nc", "--machine", result,
+                            "--set", "X.backlash.gap_mm=-1"), "backlash gap_mm must be > 0, got -1.0")
+    via_effect = refused(agent("simulate", work / "prog/ident_low.nc", "--effect", "backlash=-1",
+                               "-o", tmp_path / "x.mcap"), "backlash gap_mm must be > 0, got -1.0")
+    assert via_set.split("backlash gap_mm")[1] == via_effect.split("backlash gap_mm")[1]
+    assert not (tmp_path / "x.mcap").exists()
+
+
+def test_generate_refuses_a_negative_seed(tmp_path):
+    refused(agent("generate", "--seed", -1, "-o", tmp_path / "p"), "--seed must be a whole number >= 0")
+    assert not (tmp_path / "p").exists()
+
+
+# --------------------------------------------------------------------------- outputs
+
+
+@pytest.mark.parametrize("command", ["identify", "predict", "ballbar", "simulate"])
+def test_an_output_into_a_missing_directory_fails_before_the_run(tmp_path, work, result, command):
+    missing = tmp_path / "no_such_dir"
+    args = {
+        "identify": ["identify", work / "run.mcap", "--json", missing / "r.json"],
+        "predict": ["predict", work / "prog/ident_low.nc", "--machine", result, "--report", missing / "p.html"],
+        "ballbar": ["ballbar", "--machine", result, "--json", missing / "b.json"],
+        "simulate": ["simulate", work / "prog/ident_low.nc", "-o", missing / "s.mcap"],
+    }[command]
+    proc = agent(*args)
+    refused(proc, "no_such_dir does not exist")
+    assert proc.stdout == ""  # refused before the run: nothing computed, nothing printed
+
+
+def test_a_closed_stdout_ends_the_command_quietly(work, tmp_path):
+    cmd = " ".join([*AGENT, "simulate", str(work / "prog/ident_low.nc"), "-o", str(tmp_path / "s.mcap")])
+    proc = subprocess.run(f"{cmd} | head -c 1 >/dev/null; echo ${{PIPESTATUS[0]}}", shell=True, executable="/bin/bash",
+                          capture_output=True, text=True, timeout=300)
+    assert proc.stderr == ""
+    assert proc.stdout.strip() in ("0", "141")  # done, or stopped by the closed pipe: never "error: Broken pipe"
+    assert (tmp_path / "s.mcap").exists()
+
+
+# --------------------------------------------------------------------------- the command line
+
+
+def test_model_scores_the_old_model_as_it_was_identified(tmp_path, work, result):
+    new = tmp_path / "new.mcap"
+    assert agent("simulate", work / "prog/ident_low.nc", work / "prog/ident_high.nc", "--seed", 7, "-o",
+                 new).returncode == 0
+    out = tmp_path / "scored.json"
+    proc = agent("identify", new, "--model", result, "--no-diagnose", "--json", out)
+    assert proc.returncode == 0, proc.stderr
+    old = json.loads(result.read_text())["axes"]["X"]
+    assert f"the model of {result.name} as it was identified (preview shift {old['preview_shift_samples']} " \
+           in proc.stdout
+    assert "equation-error model before refinement" not in proc.stdout  # no fresh-fit lines passed off as its
+    scored = json.loads(out.read_text())["axes"]["X"]
+    assert scored["model_from"] == result.name
+    assert scored["preview_shift_samples"] == old["preview_shift_samples"]
+    assert scored["model"] == old["model"]
+    # the same model, scored as identified, fits a second recording of the same machine as well
+    assert scored["fit"]["identification"]["tracking_error_fit_pct"] > 99
+
+
+def test_against_without_the_diagnosis_is_refused(work):
+    refused(agent("identify", work / "run.mcap", "--no-diagnose", "--against", work / "run.mcap"),
+            "--against", "--no-diagnose")
+
+
+def test_solver_ls_says_it_is_unconstrained_and_flags_poles_outside_the_bounds(work):
+    proc = agent("identify", work / "run.mcap", "--solver", "ls", "--no-diagnose")
+    assert proc.returncode == 0, proc.stderr
+    assert "constrained model reaches" not in proc.stdout and "active constraints: none" not in proc.stdout
+    assert "constraints: none applied (solver ls, unconstrained); outside the bounds: f_max (poles up to 500 Hz" \
+           in proc.stdout

@@ -26,13 +26,13 @@ def ballbar(
 
     Example: agent ballbar --machine result.json --radius 100 --feed 16.67 --report ballbar.html
     """
-    from agent.outputs import check_suffix, write_json
+    from agent.outputs import check_output, write_json
     from agent.workflows.predict import load_machines
     from core.reader import load_recording
     from ident.synthetic_ballbar import run_ballbar
 
-    check_suffix(json_out, "--json", ".json")
-    check_suffix(report, "--report", ".html")
+    check_output(json_out, "--json", ".json")
+    check_output(report, "--report", ".html")
     plane = tuple(a.strip().upper() for a in axes.split(",") if a.strip())
     try:
         c = tuple(float(v) for v in centre.split(","))

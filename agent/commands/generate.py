@@ -59,7 +59,9 @@ def generate(
     """
     from gcode_gen.generator import generate as make_programs
     from gcode_gen.generator import save_programs
+    from agent.validation import check_seed
 
+    check_seed(seed)
     if not math.isfinite(feed) or feed <= 0:
         raise InputError(f"--feed must be a positive number of mm/s, got {feed}")
     default_axes = "X,Y" if toolpath is not None else "X"

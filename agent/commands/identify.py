@@ -8,6 +8,8 @@ from typing import List, Optional
 
 import typer
 
+from core.errors import InputError
+
 
 def identify(
     log: Path = typer.Argument(..., help="Recording to identify from (.mcap or .csv)."),
@@ -36,13 +38,18 @@ def identify(
 
     Example: agent identify run.mcap --validate other.mcap --json result.json --report report.html
     """
-    from agent.outputs import check_suffix
+    from agent.outputs import check_output
+    from agent.validation import check_seed
     from agent.summary import print_summary
     from agent.workflows.identify import identify_files
     from ident.model import Bounds
 
-    check_suffix(json_out, "--json", ".json")
-    check_suffix(report, "--report", ".html")
+    check_seed(seed)
+    if against is not None and not diagnose:
+        raise InputError("--against compares the recording with a simulated one in the diagnosis; "
+                         "it does nothing with --no-diagnose (drop one of them)")
+    check_output(json_out, "--json", ".json")
+    check_output(report, "--report", ".html")
     axes = [a for item in axis for a in item.split(",") if a.strip()]
     with _progress_line() as progress:
         result = identify_files(

@@ -25,11 +25,16 @@ def simulate(
 
     Example: agent simulate prog/ident_low.ngc prog/ident_high.ngc --machine fadal-pid -o run.mcap
     """
+    from agent.outputs import check_output
+    from agent.validation import check_seed
     from agent.workflows.predict import is_identified_machine
     from core.writer import write_recording_csv, write_recording_mcap
 
     if out.suffix.lower() != ".mcap":
         raise InputError(f"-o {out}: the log must be a .mcap file (use --csv for CSV)")
+    check_seed(seed)
+    check_output(out, "-o")
+    check_output(csv, "--csv", ".csv")
     if is_identified_machine(machine):
         from ident.virtual_machine import load_virtual_machine
 
