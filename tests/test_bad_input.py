@@ -242,3 +242,35 @@ def test_solver_ls_says_it_is_unconstrained_and_flags_poles_outside_the_bounds(w
     assert "constrained model reaches" not in proc.stdout and "active constraints: none" not in proc.stdout
     assert "constraints: none applied (solver ls, unconstrained); outside the bounds: f_max (poles up to 500 Hz" \
            in proc.stdout
+
+
+# --------------------------------------------------------------------------- resource limits and machines
+
+
+def test_a_program_too_long_to_hold_is_refused_before_allocating(tmp_path, result):
+    prog = tmp_path / "long.ngc"
+    prog.write_text("G21 G90 G94\nG1 X100000 F60\nM2\n")
+    for args in (["predict", prog, "--machine", result], ["simulate", prog, "-o", tmp_path / "long.mcap"]):
+        proc = subprocess.run(["/usr/bin/time", "-f", "%M", *AGENT, *map(str, args)], capture_output=True,
+                              text=True, timeout=300)
+        *lines, peak_kb = [ln for ln in proc.stderr.strip().splitlines() if not ln.startswith("Command exited")]
+        refused(subprocess.CompletedProcess(args, proc.returncode, proc.stdout, "\n".join(lines)),
+                "long.ngc runs 27.8 h of machine time", "1e+08 samples at 1000 Hz")
+        assert int(peak_kb) < 1_000_000  # refused before the arrays: under 1 GB, not the 50 GB it would need
+    assert not (tmp_path / "long.mcap").exists()
+
+
+def test_a_ballbar_circle_too_long_to_hold_is_refused(tmp_path, work):
+    agent("generate", "--axes", "X,Y", "--n-low", 30, "--n-high", 30, "-o", tmp_path / "p")
+    rec, res = tmp_path / "xy.mcap", tmp_path / "xy.json"
+    assert agent("simulate", tmp_path / "p/ident_low.nc", tmp_path / "p/ident_high.nc", "-o", rec).returncode == 0
+    assert agent("identify", rec, "--no-diagnose", "--no-refine", "--json", res).returncode == 0
+    refused(agent("ballbar", "--machine", res, "--radius", "1e6"), "ballbar_ccw runs 106 h of machine time")
+
+
+def test_a_machine_file_with_an_impossible_servo_loop_is_refused(tmp_path, work):
+    toml = tmp_path / "hot.toml"
+    toml.write_text('base = "fadal-ppi"\n[axes.X]\nKp = 1e9\n')
+    refused(agent("simulate", work / "prog/ident_low.nc", "--machine", toml, "-o", tmp_path / "hot.mcap"),
+            "machine hot, axis X", "Kp 1e+09", "above the 500 Hz a servo loop closed every 1 ms can realise")
+    assert not (tmp_path / "hot.mcap").exists()

@@ -35,10 +35,12 @@ def serve(
     Example: agent serve prog/ident_low.ngc prog/ident_high.ngc --transport serial
     """
     from drivers.endpoints.serve import build_recording, endpoint_class, serve as run_serve
-    from agent.validation import check_seed
+    from agent.validation import check_machine, check_seed
     from drivers.endpoints.base import parse_endpoint_options
 
     check_seed(seed)
+    if recording is None:
+        check_machine(machine)
 
     options = parse_endpoint_options(endpoint_class(transport), list(opt))
     if linger is not None:

@@ -46,7 +46,10 @@ def simulate(
             typer.echo(f"warning: {w}", err=True)
         rec = prediction.recording
     else:
+        from agent.validation import check_machine
         from virtual_cnc import simulate as run_programs
+
+        check_machine(machine)
 
         rec = run_programs(programs, machine=machine, effects=effect, seed=seed)
     write_recording_mcap(rec, out)
