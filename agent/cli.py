@@ -53,7 +53,7 @@ def _quiet_library_loggers() -> None:
 
 #: library argument (RapidIdentError.parameter) -> the option that sets it, where the
 #: option is not simply ``--`` + the argument with ``-`` for ``_``.
-FLAGS = {"options": "--opt", "programs": "PROGRAM", "out": "--out"}
+FLAGS = {"options": "--opt", "programs": "PROGRAM", "out": "--out", "center": "--centre"}
 
 
 def error_line(exc: RapidIdentError) -> str:

@@ -13,10 +13,11 @@ from core.errors import InputError
 
 def identify(
     log: Path = typer.Argument(..., help="Recording to identify from (.mcap or .csv)."),
-    axis: List[str] = typer.Option([], "--axes", "--axis", help="Axes to identify (comma list, repeatable); default all."),
-    solver: str = typer.Option("exact", "--solver", help="exact (certified constrained optimum), ga (thesis §4.2) or ls."),
+    axis: List[str] = typer.Option([], "--axes", help="Axes to identify (comma list, repeatable); default all."),
+    axis_alias: List[str] = typer.Option([], "--axis", hidden=True),  # the other spelling, kept working
+    solver: str = typer.Option("exact", "--solver", help="exact (certified constrained optimum), ga (thesis §4.2) or ls (unconstrained); docs/identification.md."),
     validate: Optional[Path] = typer.Option(None, "--validate", help="Score the model on this other recording."),
-    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the SPEC §6 JSON result here."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the JSON result (docs/spec.md §6) here."),
     report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
     against: Optional[Path] = typer.Option(None, "--against", help="Simulated log of the same program: compare virtual vs real machine."),
     model: Optional[Path] = typer.Option(None, "--model", help="Compare against the model of an earlier --json instead of identifying anew."),
@@ -50,7 +51,7 @@ def identify(
                          "it does nothing with --no-diagnose (drop one of them)")
     check_output(json_out, "--json", ".json")
     check_output(report, "--report", ".html")
-    axes = [a for item in axis for a in item.split(",") if a.strip()]
+    axes = [a for item in [*axis, *axis_alias] for a in item.split(",") if a.strip()]
     with _progress_line() as progress:
         result = identify_files(
             log, validate=validate, against=against, model=model, json_out=json_out, report=report,

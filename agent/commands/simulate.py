@@ -17,9 +17,9 @@ def simulate(
         None, "--machine", help="Machine preset name, TOML machine file, or the result JSON of agent identify "
                                 "(the identified drives; default: fadal-ppi)."),
     effect: List[str] = typer.Option(
-        [], "--effect", help="Add physics: NAME=VALUE or NAME=key:value,key:value (SPEC §7), repeatable."),
+        [], "--effect", help="Add physics: NAME=VALUE or NAME=key:value,key:value (docs/spec.md §7, docs/machine-file.md), repeatable."),
     seed: int = typer.Option(0, "--seed", help="Seed of the encoder noise."),
-    csv: Optional[Path] = typer.Option(None, "--csv", help="Also write the SPEC §4 CSV to this file."),
+    csv: Optional[Path] = typer.Option(None, "--csv", help="Also write the CSV of docs/recording-format.md to this file."),
 ) -> None:
     """Run PROGRAMs on the virtual CNC and write a recording in exactly the format a capture writes.
 
