@@ -274,3 +274,18 @@ def test_a_machine_file_with_an_impossible_servo_loop_is_refused(tmp_path, work)
     refused(agent("simulate", work / "prog/ident_low.nc", "--machine", toml, "-o", tmp_path / "hot.mcap"),
             "machine hot, axis X", "Kp 1e+09", "above the 500 Hz a servo loop closed every 1 ms can realise")
     assert not (tmp_path / "hot.mcap").exists()
+
+
+def test_metres_the_log_declares_are_converted_with_a_warning(tmp_path, run):
+    from core.writer import write_recording_mcap
+
+    tr = run.axes["X"]
+    rec = Recording(run.t, {"X": AxisTrace(tr.commanded * 1e-3, tr.actual * 1e-3)}, run.sample_period,
+                    segment=run.segment)
+    path = write_recording_mcap(rec, tmp_path / "metres.mcap", metadata={"units": "m"})
+    proc = agent("identify", path, "--no-diagnose", "--no-refine")
+    assert proc.returncode == 0, proc.stderr
+    warnings = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(warnings) == 1 and warnings[0].startswith("warning: ") and "recorded in metres" in warnings[0] \
+        and "converted to mm" in warnings[0]
+    assert "0.00 µm" not in proc.stdout
