@@ -186,7 +186,7 @@ def test_generate_refuses_a_negative_seed(tmp_path):
 # --------------------------------------------------------------------------- outputs
 
 
-@pytest.mark.parametrize("command", ["identify", "predict", "ballbar", "simulate"])
+@pytest.mark.parametrize("command", ["identify", "predict", "ballbar", "simulate", "serve", "capture"])
 def test_an_output_into_a_missing_directory_fails_before_the_run(tmp_path, work, result, command):
     missing = tmp_path / "no_such_dir"
     args = {
@@ -194,6 +194,8 @@ def test_an_output_into_a_missing_directory_fails_before_the_run(tmp_path, work,
         "predict": ["predict", work / "prog/ident_low.nc", "--machine", result, "--report", missing / "p.html"],
         "ballbar": ["ballbar", "--machine", result, "--json", missing / "b.json"],
         "simulate": ["simulate", work / "prog/ident_low.nc", "-o", missing / "s.mcap"],
+        "serve": ["serve", work / "prog/ident_low.nc", "--transport", "serial", "--fault-log", missing / "f.json"],
+        "capture": ["capture", "--port", "serial:///dev/null", "-o", missing / "c.mcap"],
     }[command]
     proc = agent(*args)
     refused(proc, "no_such_dir does not exist")

@@ -58,9 +58,9 @@ def generate(
 
     Example: agent generate --axes X --dialect linuxcnc -o prog/
     """
+    from agent.validation import check_seed
     from gcode_gen.generator import generate as make_programs
     from gcode_gen.generator import save_programs
-    from agent.validation import check_seed
 
     check_seed(seed)
     if not math.isfinite(feed) or feed <= 0:
