@@ -53,7 +53,7 @@ def _quiet_library_loggers() -> None:
 
 #: library argument (RapidIdentError.parameter) -> the option that sets it, where the
 #: option is not simply ``--`` + the argument with ``-`` for ``_``.
-FLAGS = {"options": "--opt", "programs": "PROGRAM", "out": "--out"}
+FLAGS = {"options": "--opt", "programs": "PROGRAM", "out": "--out", "center": "--centre"}
 
 
 def error_line(exc: RapidIdentError) -> str:
@@ -73,6 +73,20 @@ def error_line(exc: RapidIdentError) -> str:
     return f"{flag}: {message}"
 
 
+#: Exit status when stdout's reader went away (``agent simulate … | head -1``): a shell tool's
+#: 128 + SIGPIPE, without a message — the reader asked for no more.
+EXIT_BROKEN_PIPE = 141
+
+
+def _leave_quietly() -> None:
+    """Point stdout at /dev/null so the interpreter's final flush cannot fail a second time."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+
+
 def reports_errors(func: Callable) -> Callable:
     """Run a command, printing a RapidIdentError as one line instead of a traceback."""
 
@@ -82,7 +96,12 @@ def reports_errors(func: Callable) -> Callable:
         _quiet_library_loggers()
         warnings.simplefilter("always", RapidIdentWarning)
         try:
-            return func(*args, **kwargs)
+            value = func(*args, **kwargs)
+            sys.stdout.flush()  # a reader that went away shows here, not at interpreter exit
+            return value
+        except BrokenPipeError:
+            _leave_quietly()
+            raise typer.Exit(EXIT_BROKEN_PIPE) from None
         except RapidIdentError as exc:
             print(f"error: {error_line(exc)}", file=sys.stderr)
             raise typer.Exit(2 if isinstance(exc, InputError) else 1) from None

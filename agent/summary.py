@@ -45,21 +45,37 @@ def print_summary(result: IdentifyResult) -> None:
         echo(f"  missing physics: {h.missing}")
         echo(f"  what to do:      {h.action}")
         m = r.model
-        echo(f"  details: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
-             + f", preview shift {r.shift} sample(s)")
+        if r.prior_source:
+            echo(f"  details: the model of {r.prior_source} as it was identified (preview shift {r.shift} "
+                 "sample(s)), scored on this recording; not re-identified")
+        else:
+            echo(f"  details: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
+                 + f", preview shift {r.shift} sample(s)")
         echo("  model (eq. 3.3): " + ", ".join(f"{k}={_fmt(getattr(m, k))}" for k in
                                                  ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")))
         echo("  poles:  " + "; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.poles()))
         echo("  zeros:  " + ("; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.zeros()) or "none"))
-        echo("  active constraints: " + (", ".join(r.active_constraints) or "none"))
+        if r.prior_source:
+            pass  # the constraints of a fit made elsewhere are in that file's JSON
+        elif r.constrained.solver == "ls":
+            outside = r.bounds.check(m, r.sample_period)
+            echo("  constraints: none applied (solver ls, unconstrained)"
+                 + (f"; outside the bounds: {', '.join(outside)} (poles up to "
+                    f"{r.bounds.f_max_hz_for(r.sample_period):g} Hz allowed)" if outside else ""))
+        else:
+            echo("  active constraints: " + (", ".join(r.active_constraints) or "none"))
         _print_intervals(r)
         for note in term_notes(r):
             echo(f"  note: {note}")
         fi = r.fit_identification
-        echo(f"  tracking-error fit on the identification recording (not held out): {fi.tracking_error_fit_pct:.2f} % "
-             f"(prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm); equation-error model before "
-             f"refinement {r.fit_constrained.tracking_error_fit_pct:.2f} %")
-        echo(f"  unconstrained LS: {r.unconstrained_note}")
+        if r.prior_source:
+            echo(f"  tracking-error fit of that model on this recording: {fi.tracking_error_fit_pct:.2f} % "
+                 f"(prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm)")
+        else:
+            echo(f"  tracking-error fit on the identification recording (not held out): {fi.tracking_error_fit_pct:.2f} % "
+                 f"(prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm); equation-error model before "
+                 f"refinement {r.fit_constrained.tracking_error_fit_pct:.2f} %")
+            echo(f"  unconstrained LS: {r.unconstrained_note}")
         if r.diagnosis is not None:
             echo("  diagnosis: " + r.diagnosis.summary)
         echo("  time: " + ", ".join(f"{k} {v:.2f} s" for k, v in r.timings.items()))

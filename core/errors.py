@@ -18,6 +18,7 @@ __all__ = [
     "RecordingError",
     "MachineError",
     "IdentificationError",
+    "UnusableRecordingError",
     "TransportError",
     "TransportTimeout",
     "StreamError",
@@ -73,6 +74,15 @@ class MachineError(InputError):
 
 class IdentificationError(RapidIdentError):
     """The drive model cannot be identified from the data (no motion, no reversals, singular regression)."""
+
+
+class UnusableRecordingError(RecordingError, IdentificationError):
+    """A readable recording that cannot identify a drive: no motion, one direction only, too
+    short, actual equal to commanded, channels swapped, a prediction rather than a measurement.
+
+    Bad input (exit 2) said in the recording's terms; still an :class:`IdentificationError`
+    for callers that catch that around the regression.
+    """
 
 
 class TransportError(RapidIdentError):

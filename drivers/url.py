@@ -18,6 +18,8 @@ from core.errors import InputError
 
 __all__ = ["PortURL", "parse_port_url"]
 
+#: Schemes whose path is a device on this computer (no host part: scheme:///dev/...).
+_DEVICE_SCHEMES = ("serial", "modbus-rtu")
 _TRUE = {"1", "true", "yes", "on"}
 _FALSE = {"0", "false", "no", "off"}
 
@@ -75,6 +77,10 @@ def parse_port_url(text: str) -> PortURL:
         if key in query:
             raise InputError.about("port", f"{text}: option {key!r} given twice")
         query[key] = value
+    if parts.scheme.lower() in _DEVICE_SCHEMES and parts.netloc:
+        raise InputError.about(
+            "port", f"{text}: {parts.netloc!r} would be read as a host name, and {parts.path or '/'} as the device; "
+            f"a device path needs three slashes: {parts.scheme}:///{parts.netloc}{parts.path}")
     try:
         port = parts.port
     except ValueError:

@@ -42,6 +42,7 @@ from typing import Sequence
 import numpy as np
 
 from core.errors import InputError
+from core.run_limits import check_run_size
 from gcode_gen.program import Block, Program
 
 __all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile"]
@@ -318,6 +319,7 @@ def interpolate(
             par[k][i] = getattr(prof, k)
 
     total = int(n.sum())
+    check_run_size(total, Ts, len(names), program.name or "the program")  # before the first array of that length
     seg_of = np.repeat(np.arange(len(segs)), n)
     first_k = np.concatenate([[0], np.cumsum(n)[:-1]]) if len(segs) else np.zeros(0, dtype=np.int64)
     k_local = np.arange(total) - np.repeat(first_k, n) + 1  # 1..n within each segment

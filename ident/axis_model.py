@@ -26,6 +26,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from core.effect_limits import check_effect_parameters
 from core.errors import InputError
 from ident.model import DriveModel
 
@@ -73,6 +74,8 @@ class AxisModel:
             raise InputError(f"controller {self.controller!r}: one of {', '.join(CONTROLLERS)}")
         if not self.sample_period > 0:
             raise InputError(f"sample period must be > 0 s, got {self.sample_period}")
+        for name, params in self.effects.items():
+            check_effect_parameters(name, params, complete=True)
 
     # -- simulation ---------------------------------------------------------------------
     @property
@@ -154,7 +157,8 @@ class AxisModel:
             model = DriveModel(**{k: float(base[k]) for k in BASE_KEYS})
             return cls(model=model, sample_period=float(doc["sample_period_s"]),
                        shift=int(doc.get("preview_shift_samples", 0)),
-                       effects={str(e): dict(p) for e, p in dict(doc.get("effects") or {}).items()},
+                       effects={str(e): dict(p) if isinstance(p, Mapping) else p  # checked as given
+                                for e, p in dict(doc.get("effects") or {}).items()},
                        controller=str(doc.get("controller", "continuous")))
         except KeyError as exc:
             raise InputError(f"axis model has no {exc.args[0]!r}") from None

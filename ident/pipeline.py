@@ -20,10 +20,11 @@ import numpy as np
 from core.errors import InputError, RecordingError
 from core.reader import load_recording
 from core.recording import Recording
-from ident.axis_model import AxisModel
+from ident.axis_model import BASE_KEYS, AxisModel
 from ident.contour import contour_error
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel
+from ident.plausibility import check_identifiable
 from ident.preprocessing import prepare_recording
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
@@ -97,11 +98,17 @@ def _fit_or_none(model: DriveModel, rec: Recording, axis: str, shift: int) -> Fi
 
 
 def _ls_note(ls_model: DriveModel, bounds: Bounds, Ts: float, fit_ls: FitResult | None,
-             fit_final: FitResult, duration_s: float) -> str:
+             fit_final: FitResult, duration_s: float, solver: str = "exact") -> str:
     violated = bounds.check(ls_model, Ts)
     poles = ", ".join(f"{f:.2f} Hz/ζ {d:.2f}" for f, d in ls_model.poles())
     run = ("its free-run simulation diverges" if fit_ls is None else
            f"its free-run tracking-error fit on this recording is {fit_ls.tracking_error_fit_pct:.1f} %")
+    if solver == "ls":  # the model reported *is* this one: no constrained model to compare with
+        if not violated:
+            return f"Unconstrained least squares (solver ls): poles {poles}, inside the bounds; {run}."
+        return (f"Unconstrained least squares (solver ls) applies no pole constraint: poles {poles}, outside the "
+                f"allowed region ({', '.join(violated)}; poles up to {bounds.f_max_hz_for(Ts):g} Hz allowed); {run}. Such a model cannot be trusted on a longer part "
+                f"program or in a virtual machine: use solver exact or ga for one inside the bounds of eq. 3.8.")
     if not violated:
         return (f"Unconstrained least squares gives poles {poles}, inside the bounds, and {run}; "
                 f"the constraints are not active here.")
@@ -120,19 +127,35 @@ def _ls_note(ls_model: DriveModel, bounds: Bounds, Ts: float, fit_ls: FitResult 
             f"and the constrained model reaches {fit_final.tracking_error_fit_pct:.1f} %.")
 
 
-def load_models(path: str | Path) -> dict[str, DriveModel]:
-    """The per-axis drive models of an identification result JSON (``IdentifyResult.to_json``)."""
+def load_models(path: str | Path) -> dict[str, AxisModel]:
+    """The per-axis models of an identification result JSON (``IdentifyResult.to_json``) as they were
+    identified: eq. 3.3 with the preview shift and sample period of that identification."""
+    from ident.virtual_machine import check_result_format
+
+    name = Path(path).name
     try:
         doc = json.loads(Path(path).read_text())
-        return {a: DriveModel(**{k: float(v) for k, v in r["model"].items()}) for a, r in doc["axes"].items()}
     except FileNotFoundError:
         raise InputError.about("model", f"{path}: no such file") from None
-    except (ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise InputError.about("model", f"{path}: not an identification result JSON ({exc})") from None
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise InputError.about("model", f"{path}: not a result JSON ({str(exc).splitlines()[0]})") from None
+    try:
+        check_result_format(doc, name)
+        out = {}
+        for a, r in doc["axes"].items():
+            out[str(a)] = AxisModel(DriveModel(**{k: float(r["model"][k]) for k in BASE_KEYS}),
+                                    float(r["virtual_model"]["sample_period_s"]), int(r["preview_shift_samples"]))
+        return out
+    except InputError as exc:
+        raise InputError.about("model", str(exc)) from None
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError.about("model", f"{name}: a result JSON without a usable model ({type(exc).__name__}: "
+                               f"{exc})") from None
 
 
 def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recording | None,
-          against: Recording | None, prior: DriveModel | None) -> AxisResult:
+          against: Recording | None, prior: DriveModel | AxisModel | None,
+          prior_source: str | None = None) -> AxisResult:
     Ts = rec.sample_period
     tr = rec.axes[axis]
     timings: dict[str, float] = {}
@@ -153,7 +176,13 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
 
     refined = None
     model = constrained.model
-    if prior is not None:
+    shift = reg.shift
+    if isinstance(prior, AxisModel):  # scored as it was identified: its own preview shift
+        if not np.isclose(prior.sample_period, Ts, rtol=1e-6):
+            raise InputError.about("model", f"the model of axis {axis} was identified at a sample period of "
+                                   f"{prior.sample_period * 1e3:g} ms, the recording's is {Ts * 1e3:g} ms")
+        model, shift = prior.model, prior.shift
+    elif prior is not None:
         model = prior
     elif opts.refine and opts.solver != "ls":
         t0 = time.perf_counter()
@@ -169,7 +198,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         timings["intervals"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    x_hat = _free_run(model, rec, axis, reg.shift)
+    x_hat = _free_run(model, rec, axis, shift)
     fit_id = fit_result(tr.commanded - tr.actual, tr.commanded - x_hat)
     fit_eq = _fit_or_none(constrained.model, rec, axis, reg.shift) or FitResult(float("nan"), float("nan"))
     fit_ls = _fit_or_none(ls.model, rec, axis, reg.shift)
@@ -177,7 +206,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
     fit_val = None
     if val is not None:
         vt = val.axes[axis]
-        xv_hat = _free_run(model, val, axis, reg.shift)
+        xv_hat = _free_run(model, val, axis, shift)
         fit_val = fit_result(vt.commanded - vt.actual, vt.commanded - xv_hat)
         val_traces = AxisTraces(val.t, vt.commanded, vt.actual, xv_hat, val.segment)
     timings["fits"] = time.perf_counter() - t0
@@ -192,12 +221,12 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
 
     return AxisResult(
         axis=axis, model=model, constrained=constrained, unconstrained=ls, refined=refined,
-        bounds=opts.bounds, sample_period=Ts, shift=reg.shift,
+        bounds=opts.bounds, sample_period=Ts, shift=shift,
         fit_identification=fit_id, fit_validation=fit_val, fit_constrained=fit_eq, fit_unconstrained=fit_ls,
-        unconstrained_note=_ls_note(ls.model, opts.bounds, Ts, fit_ls, fit_id, rec.duration),
+        unconstrained_note=_ls_note(ls.model, opts.bounds, Ts, fit_ls, fit_id, rec.duration, opts.solver),
         diagnosis=diagnosis, timings=timings, uncertainty=uncertainty,
         traces=AxisTraces(rec.t, tr.commanded, tr.actual, x_hat, rec.segment),
-        validation_traces=val_traces,
+        validation_traces=val_traces, prior_source=prior_source if prior is not None else None,
     )
 
 
@@ -299,7 +328,8 @@ def identify(
     diagnose: bool = True,
     *,
     against: Recording | str | Path | None = None,
-    prior: Mapping[str, DriveModel] | None = None,
+    prior: Mapping[str, DriveModel | AxisModel] | None = None,
+    prior_source: str | None = None,
     bounds: Bounds = Bounds(),
     refine: bool = True,
     seed: int = 0,
@@ -307,6 +337,7 @@ def identify(
     ga_generations: int = 500,
     progress: Callable[[str], None] | None = None,
     diagnosis_config: "DiagnosisConfig | None" = None,
+    units: str = "auto",
 ) -> IdentifyResult:
     """Identify the drive model of every (or each chosen) axis of a recording.
 
@@ -320,13 +351,18 @@ def identify(
     diagnose : locate and explain the mismatch (ident.diagnosis).
     against : a simulated recording of the same program; the diagnosis then compares
         virtual and real machine.
-    prior : per-axis models to check instead of identifying anew (see :func:`load_models`).
+    prior : per-axis models to check instead of identifying anew (see :func:`load_models`); an
+        :class:`AxisModel` is scored with its own preview shift, as it was identified.
+    prior_source : where ``prior`` came from (a file name), for the summary and the JSON.
     bounds : pole constraints of eq. 3.8 (SPEC §5 defaults).
     refine : output-error refinement after the equation-error solve.
     seed, ga_population, ga_generations : of the genetic algorithm (``solver="ga"``).
     progress : called with a short description of each diagnosis stage (a progress line).
     diagnosis_config : an :class:`ident.diagnosis.config.DiagnosisConfig` (its tunables, e.g.
         for a benchmark's sweep); default its documented values.
+    units : positions in "mm", in "m" (converted), or "auto": metres recorded in the metadata
+        are converted, values that only look like metres are refused
+        (:func:`ident.plausibility.check_identifiable`, which every recording passes first).
 
     Returns
     -------
@@ -344,9 +380,10 @@ def identify(
     # The fits solve thousands of 3x3..9x9 systems: a multi-threaded BLAS would spend
     # more on hand-offs between threads than on the arithmetic.
     with threadpool_limits(limits=1, user_api="blas"):
-        rec = prepare_recording(_as_recording(recording, "recording"))
+        rec = prepare_recording(_as_recording(recording, "recording"), check_units=False)
         names = _pick_axes(rec, axes)
-        val = prepare_recording(_as_recording(validate, "validate")) if validate is not None else None
+        rec = check_identifiable(rec, names, units=units)
+        val = prepare_recording(_as_recording(validate, "validate"), check_units=False) if validate is not None else None
         if val is not None:
             missing = [a for a in names if a not in val.axes]
             if missing:
@@ -356,12 +393,13 @@ def identify(
                 raise RecordingError.about(
                     "validate", f"validation recording {_name(val, '')}: sample period {val.sample_period * 1e3:.4g} "
                     f"ms differs from the recording's {rec.sample_period * 1e3:.4g} ms")
+            val = check_identifiable(val, names, units=units)
         sim = _as_recording(against, "against") if against is not None else None
         priors = dict(prior or {})
         for a in names:
             if priors and a not in priors:
                 raise InputError.about("model", f"the given models have none for axis {a}")
-        results = {a: _axis(rec, a, opts, progress, val, sim, priors.get(a)) for a in names}
+        results = {a: _axis(rec, a, opts, progress, val, sim, priors.get(a), prior_source) for a in names}
         contour = _contour(results, rec, val)
     meta = {k: v for k, v in rec.metadata.items() if k not in ("events", "counter", "source")}
     return IdentifyResult(_name(rec, "<in memory>"), _name(val, "<in memory>") if val is not None else None,

@@ -57,7 +57,7 @@ from typing import TYPE_CHECKING, Literal, Mapping
 
 import numpy as np
 
-from core.errors import IdentificationError, InputError, RecordingError, RapidIdentWarning
+from core.errors import IdentificationError, InputError, RecordingError, RapidIdentWarning, UnusableRecordingError
 
 if TYPE_CHECKING:
     from core.recording import Recording
@@ -312,8 +312,8 @@ def check_motion(
     ------
     RecordingError
         Fewer than 2 samples, NaN/inf.
-    IdentificationError
-        No motion on the axis.
+    UnusableRecordingError
+        No motion on the axis (an :class:`IdentificationError` too).
 
     Warns
     -----
@@ -331,7 +331,7 @@ def check_motion(
     check_finite(x, axis=axis, what="actual position")
     span = max(np.ptp(x_r), np.ptp(x))
     if span <= 1e-9:
-        raise IdentificationError(
+        raise UnusableRecordingError(
             f"no motion on axis {axis}: commanded and actual position stay at {x[0]:.6g} mm"
         )
     if not warn_units:
@@ -361,7 +361,7 @@ def check_motion(
 
 
 def check_reversals(direction_signal: np.ndarray, *, axis: str = "X") -> None:
-    """Raise :class:`IdentificationError` unless the axis moves in both directions.
+    """Raise :class:`UnusableRecordingError` unless the axis moves in both directions.
 
     The friction terms d0 (PV, ẋ > 0) and d1 (NV, ẋ < 0) of eq. 3.3 are only identifiable
     when both directions occur.
@@ -376,10 +376,11 @@ def check_reversals(direction_signal: np.ndarray, *, axis: str = "X") -> None:
     d = np.asarray(direction_signal)
     n_pos, n_neg = int(np.count_nonzero(d > 0)), int(np.count_nonzero(d < 0))
     if n_pos == 0 or n_neg == 0:
-        only = "positive" if n_pos else ("negative" if n_neg else "no")
-        raise IdentificationError(
-            f"axis {axis} never reverses direction ({only} motion only); "
-            "friction d0/d1 cannot be identified"
+        only = "in the positive direction only" if n_pos else ("in the negative direction only" if n_neg else
+                                                                "too little to tell a direction")
+        raise UnusableRecordingError(
+            f"axis {axis} never reverses direction: it moves {only}; the friction of each direction "
+            "(d0/d1) needs moves both ways, as agent generate's programs make"
         )
 
 
@@ -632,13 +633,16 @@ def direction(
 # --------------------------------------------------------------------------- recording level
 
 
-def prepare_recording(rec: "Recording", *, jitter_tol: float = 0.01, gap_factor: float = 1.5) -> "Recording":
+def prepare_recording(rec: "Recording", *, jitter_tol: float = 0.01, gap_factor: float = 1.5,
+                      check_units: bool = True) -> "Recording":
     """Check and regularise a :class:`core.recording.Recording` on load.
 
     Time is checked and regularised once for all axes (:func:`regularise_sampling`), each
     axis is checked for NaN/inf and units (:func:`check_motion`, warnings).  Motion and
     reversals are checked per identified axis by the regression (an idle axis of a
-    multi-axis capture is not an error here).
+    multi-axis capture is not an error here).  ``check_units=False`` leaves the metres
+    warnings to the caller (:func:`ident.plausibility.check_identifiable` refuses or
+    converts metres on the identified axes).
 
     Returns a new Recording on the regular grid with renumbered segments.
     """
@@ -664,7 +668,8 @@ def prepare_recording(rec: "Recording", *, jitter_tol: float = 0.01, gap_factor:
     for name, tr in axes.items():
         u = units.get(name) if isinstance(units, dict) else units  # per-axis or global units
         try:
-            check_motion(tr.commanded, tr.actual, rec.sample_period, axis=name, units=u, segment=seg)
+            check_motion(tr.commanded, tr.actual, rec.sample_period, axis=name, units=u, segment=seg,
+                         warn_units=check_units)
         except IdentificationError:
             # An idle axis in a multi-axis capture is fine until someone identifies it;
             # build_regression raises "no motion on axis …" then.

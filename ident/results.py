@@ -61,6 +61,8 @@ class AxisResult:
     validation_traces: AxisTraces | None = None
     #: 95 % intervals of the final model (None for a model given with ``--model``)
     uncertainty: Uncertainty | None = None
+    #: the file of an earlier identification whose model this scores (``--model``); None: identified here
+    prior_source: str | None = None
 
     @property
     def base_model(self) -> AxisModel:
@@ -106,6 +108,8 @@ class AxisResult:
         out["active_constraints"] = list(self.active_constraints)
         out["bounds"] = self.bounds.with_sample_period(self.sample_period).to_dict()
         out["preview_shift_samples"] = self.shift
+        if self.prior_source is not None:
+            out["model_from"] = self.prior_source
         out["fit"] = {"identification": self.fit_identification.to_dict(),
                       "validation": self.fit_validation.to_dict() if self.fit_validation else None}
         eq = self.constrained.model.to_dict(self.bounds, self.sample_period)

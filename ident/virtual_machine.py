@@ -29,8 +29,10 @@ from core.errors import InputError, MachineError
 from core.recording import AxisTrace, Recording
 from gcode_gen.commands import CommandedRun, ProgramLike, command_programs
 from ident.axis_model import AxisModel
+from ident.model_limits import check_runnable
 
-__all__ = ["VirtualMachine", "Prediction", "load_virtual_machine", "INTERPOLATOR_DEFAULTS", "RESULT_FORMATS"]
+__all__ = ["VirtualMachine", "Prediction", "load_virtual_machine", "check_result_format", "INTERPOLATOR_DEFAULTS",
+           "RESULT_FORMATS"]
 
 #: Result formats that carry a ``virtual_model`` per axis.
 RESULT_FORMATS = ("rapid-ident-result/2",)
@@ -105,12 +107,7 @@ class VirtualMachine:
     @classmethod
     def from_result(cls, doc: Mapping[str, Any], name: str = "identified machine") -> "VirtualMachine":
         """From the parsed result JSON (:meth:`ident.IdentifyResult.to_dict`)."""
-        fmt = doc.get("format") if isinstance(doc, Mapping) else None
-        if fmt not in RESULT_FORMATS:
-            if isinstance(doc, Mapping) and "axes" in doc:
-                raise InputError(f"{name}: written by an older rapid-ident (format {fmt or 'unversioned'}, "
-                                 f"needs {RESULT_FORMATS[-1]}); run agent identify again")
-            raise InputError(f"{name}: not an identification result (no 'format'/'axes')")
+        check_result_format(doc, name)
         axes: dict[str, AxisModel] = {}
         ranges: dict[str, Any] = {}
         for axis, r in dict(doc.get("axes") or {}).items():
@@ -148,7 +145,11 @@ class VirtualMachine:
                 value = float(rhs)
             except ValueError:
                 raise InputError(f"{text!r}: {rhs.strip()!r} is not a number") from None
-            axes[axis] = axes[axis].with_parameter(param.strip(), value)
+            try:
+                axes[axis] = axes[axis].with_parameter(param.strip(), value)
+            except InputError as exc:
+                raise InputError(f"{text!r}: {exc}") from None
+            check_runnable(axes[axis].model, self.Ts, f"{text!r}")
         suffix = " with " + ", ".join(assignments) if assignments else ""
         return replace(self, axes=axes, name=self.name + suffix)
 
@@ -203,6 +204,31 @@ class VirtualMachine:
                 out.append(f"axis {axis} reaches {v:.0f} mm/s; the model was identified up to {vmax:.0f} mm/s, "
                            f"so faster motion is extrapolated")
         return out
+
+
+def _version(fmt: str) -> int:
+    tail = fmt.rpartition("/")[2]
+    return int(tail) if tail.isdigit() else 0
+
+
+def check_result_format(doc: Any, name: str) -> None:
+    """One-line InputError unless ``doc`` is a result JSON this version reads (:data:`RESULT_FORMATS`):
+    another tool's JSON is "not a rapid-ident result", an older rapid-ident's says to identify again."""
+    fmt = doc.get("format") if isinstance(doc, Mapping) else None
+    if fmt in RESULT_FORMATS:
+        return
+    axes = doc.get("axes") if isinstance(doc, Mapping) else None
+    ours = isinstance(fmt, str) and fmt.startswith("rapid-ident-result/")
+    unversioned = (fmt is None and isinstance(axes, Mapping) and axes
+                   and all(isinstance(r, Mapping) and isinstance(r.get("model"), Mapping) and "a1" in r["model"]
+                           for r in axes.values()))
+    if ours or unversioned:
+        newer = ours and _version(fmt) > _version(RESULT_FORMATS[-1])
+        raise InputError(f"{name}: written by {'a newer' if newer else 'an older'} rapid-ident (format "
+                         f"{fmt or 'unversioned'}, this one reads {RESULT_FORMATS[-1]}); run agent identify again")
+    what = (f"format {fmt!r}" if fmt is not None else
+            "no 'format' field" if isinstance(doc, Mapping) else f"a JSON {type(doc).__name__}")
+    raise InputError(f"{name}: not a rapid-ident result ({what}); give the JSON agent identify --json wrote")
 
 
 def load_virtual_machine(path: str | Path) -> VirtualMachine:

@@ -28,7 +28,7 @@ $AGENT serve --transport "$TRANSPORT" --machine "$MACHINE" \
 SERVE_PID=$!
 trap 'kill $SERVE_PID 2>/dev/null || true' EXIT
 for _ in $(seq 1 300); do
-  PORT=$(sed -n 's/^port: //p' "$OUT/serve.log" | head -n1)
+  PORT=$(sed -n "s/^port: //p" "$OUT/serve.log" | head -n1 | tr -d "'")  # printed shell-quoted
   [ -n "$PORT" ] && break
   kill -0 $SERVE_PID 2>/dev/null || { cat "$OUT/serve.log"; exit 1; }
   sleep 0.1

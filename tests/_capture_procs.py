@@ -23,6 +23,7 @@ import json
 import os
 import select
 import signal
+import shlex
 import subprocess
 import sys
 import time
@@ -60,7 +61,7 @@ class Server:
         if not line.startswith("port: "):
             self.kill()
             raise AssertionError(f"serve printed {line!r} first; stderr: {self.stderr()}")
-        self.port = line[len("port: "):].strip()
+        self.port = shlex.split(line[len("port: "):])[0]  # printed shell-quoted
 
     def stderr(self) -> str:
         self._err.flush()

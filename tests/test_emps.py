@@ -22,7 +22,7 @@ from ident.regression import build_regression, lstsq_scaled
 DATA = Path(__file__).parents[2] / "shared/data/emps/DATA_EMPS.mat"
 TS = 1e-3
 
-pytestmark = pytest.mark.skipif(not DATA.exists(), reason=f"{DATA} not available")
+pytestmark = [pytest.mark.needs_data, pytest.mark.skipif(not DATA.exists(), reason=f"{DATA} not available")]
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ import pytest
 
 import _emps_model as em
 
-pytestmark = pytest.mark.skipif(not em.DATA.exists(), reason=f"{em.DATA} not available")
+pytestmark = [pytest.mark.needs_data, pytest.mark.skipif(not em.DATA.exists(), reason=f"{em.DATA} not available")]
 
 #: The pulses: 200 N for 0.5 s every 2.5 s from t = 1 s (about 0.15 mm of extra tracking error).
 PULSE_N, WIDTH_S, PERIOD_S = 200.0, 0.5, 2.5

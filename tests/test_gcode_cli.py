@@ -29,7 +29,7 @@ def test_writes_both_identification_sets(tmp_path, dialect, ext):
 
 
 def test_options_reach_the_programs(tmp_path):
-    res = _run("--axes", "x,y", "--center", "50,-20", "--range", "4", "--low-step", "0.01",
+    res = _run("--axes", "x,y", "--centre", "50,-20", "--range", "4", "--low-step", "0.01",
                "--feed", "100", "-o", str(tmp_path))
     assert res.exit_code == 0, res.output
     high = read_program(tmp_path / "ident_high.nc")
@@ -77,8 +77,9 @@ def test_writes_a_validation_toolpath(tmp_path, kind):
         (["--low-step", "11"], "low-step 11.0 mm is larger than the range"),
         (["--dialect", "fanuc"], "unknown dialect 'fanuc'"),
         (["--axes", "X,Q"], "unknown axis letter 'Q'"),
-        (["--center", "1,2"], "--center has 2 values for 1 axes"),
-        (["--center", "abc"], "--center needs numbers"),
+        (["--centre", "1,2"], "--centre has 2 values for 1 axes"),
+        (["--centre", "abc"], "--centre needs numbers"),
+        (["--center", "abc"], "--centre needs numbers"),  # the other spelling still works
         (["--toolpath", "star"], "unknown toolpath 'star'"),
         (["--toolpath", "circle", "--size", "0"], "circle size must be a positive"),
         (["--toolpath", "diamond", "--axes", "X"], "needs two different axes"),

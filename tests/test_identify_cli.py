@@ -82,7 +82,8 @@ def _write(tmp_path: Path, name: str, text: str) -> Path:
             d / "still.csv"), "no motion on axis X"),
         (lambda d: write_recording_csv(
             Recording(np.arange(2000) * 1e-3,
-                      {"X": AxisTrace(np.linspace(0, 10, 2000), np.linspace(0, 10, 2000) - 0.01)}, 1e-3),
+                      {"X": AxisTrace(np.linspace(0, 10, 2000), np.linspace(0, 10, 2000) - 0.01 * np.tanh(
+                          np.arange(2000) / 50))}, 1e-3),
             d / "oneway.csv"), "never reverses direction"),
         (lambda d: d / "absent.mcap", "no such file"),
     ],
@@ -96,10 +97,18 @@ def test_bad_recordings_give_one_line_errors(tmp_path, maker, message):
     assert message in lines[0]
 
 
-def test_metres_given_as_mm_warns(tmp_path):
+def test_metres_given_as_mm_is_refused_unless_the_units_are_given(tmp_path):
     path = write_recording_csv(_random_moves(scale=1e-3), tmp_path / "metres.csv")
     proc = run_in_process("identify", path, "--no-diagnose")
-    assert "look like metres given as mm" in proc.stderr
+    assert proc.exit_code == 2 and "--units" in proc.stderr and "look like metres" in proc.stderr
+    proc = run_in_process("identify", path, "--no-diagnose", "--units", "m", "--json", tmp_path / "m.json")
+    assert proc.exit_code == 0, proc.output
+    mm = write_recording_csv(_random_moves(), tmp_path / "mm.csv")
+    assert run_in_process("identify", mm, "--no-diagnose", "--json", tmp_path / "mm.json").exit_code == 0
+    # converted to mm: the poles of the same moves recorded in mm
+    poles = [[p["freq_hz"] for p in json.loads((tmp_path / f).read_text())["axes"]["X"]["poles"]]
+             for f in ("m.json", "mm.json")]
+    np.testing.assert_allclose(poles[0], poles[1], rtol=1e-3)
 
 
 def test_unknown_axis_and_solver_are_named(tmp_path, good_csv):

@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 EMPS = ROOT.parent / "shared" / "data" / "emps" / "DATA_EMPS.mat"
 
-pytestmark = pytest.mark.skipif(not EMPS.exists(), reason="EMPS data set not present")
+pytestmark = [pytest.mark.needs_data, pytest.mark.skipif(not EMPS.exists(), reason="EMPS data set not present")]
 
 
 @pytest.mark.slow

@@ -42,6 +42,7 @@ import math
 from dataclasses import dataclass, fields
 from typing import ClassVar, Union
 
+from core.effect_limits import check_effect_parameters
 from core.errors import InputError
 
 __all__ = [
@@ -58,14 +59,9 @@ __all__ = [
 ]
 
 
-def _check(name: str, value: float, lo: float | None = None, hi: float | None = None,
-           lo_open: bool = False) -> None:
-    if not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise InputError(f"{name} must be a finite number, got {value!r}")
-    if lo is not None and (value < lo or (lo_open and value == lo)):
-        raise InputError(f"{name} must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
-    if hi is not None and value > hi:
-        raise InputError(f"{name} must be <= {hi:g}, got {value!r}")
+def _check_fields(effect) -> None:
+    """Every numeric parameter against the one table of allowed ranges (core.effect_limits)."""
+    check_effect_parameters(effect.name, {f.name: getattr(effect, f.name) for f in fields(effect)})
 
 
 @dataclass(frozen=True)
@@ -84,11 +80,7 @@ class Backlash:
     primary: ClassVar[str] = "gap_mm"
 
     def __post_init__(self) -> None:
-        _check("backlash gap_mm", self.gap_mm, 0.0, lo_open=True)
-        _check("backlash motor_fraction", self.motor_fraction, 0.0, 1.0, lo_open=True)
-        if self.motor_fraction >= 1.0:
-            raise InputError(f"backlash motor_fraction must be < 1, got {self.motor_fraction!r}")
-        _check("backlash contact_freq_hz", self.contact_freq_hz, 0.0, lo_open=True)
+        _check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -106,8 +98,7 @@ class Stribeck:
     primary: ClassVar[str] = "static_to_coulomb_ratio"
 
     def __post_init__(self) -> None:
-        _check("stribeck static_to_coulomb_ratio", self.static_to_coulomb_ratio, 1.0)
-        _check("stribeck stribeck_velocity_mm_s", self.stribeck_velocity_mm_s, 0.0, lo_open=True)
+        _check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -125,11 +116,7 @@ class Resonance:
     primary: ClassVar[str] = "freq_hz"
 
     def __post_init__(self) -> None:
-        _check("resonance freq_hz", self.freq_hz, 0.0, lo_open=True)
-        _check("resonance damping", self.damping, 0.0)
-        _check("resonance motor_fraction", self.motor_fraction, 0.0, 1.0, lo_open=True)
-        if self.motor_fraction >= 1.0:
-            raise InputError(f"resonance motor_fraction must be < 1, got {self.motor_fraction!r}")
+        _check_fields(self)
 
 
 #: Where a time_delay acts.
@@ -152,7 +139,7 @@ class TimeDelay:
     primary: ClassVar[str] = "delay_s"
 
     def __post_init__(self) -> None:
-        _check("time_delay delay_s", self.delay_s, 0.0, 1.0)
+        _check_fields(self)
         if self.at not in DELAY_LOCATIONS:
             raise InputError(f"time_delay at must be one of {', '.join(DELAY_LOCATIONS)}, got {self.at!r}")
 
@@ -172,9 +159,7 @@ class CyclicError:
     primary: ClassVar[str] = "period_mm"
 
     def __post_init__(self) -> None:
-        _check("cyclic_error period_mm", self.period_mm, 0.0, lo_open=True)
-        _check("cyclic_error amplitude", self.amplitude, 0.0)
-        _check("cyclic_error phase_deg", self.phase_deg)
+        _check_fields(self)
 
 
 @dataclass(frozen=True)
@@ -187,7 +172,7 @@ class Saturation:
     primary: ClassVar[str] = "limit"
 
     def __post_init__(self) -> None:
-        _check("saturation limit", self.limit, 0.0, lo_open=True)
+        _check_fields(self)
 
 
 Effect = Union[Backlash, Stribeck, Resonance, TimeDelay, CyclicError, Saturation]

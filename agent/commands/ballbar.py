@@ -18,6 +18,7 @@ def ballbar(
     feed: float = typer.Option(1000.0 / 60.0, "--feed", help="Test feed, mm/s (default 1000 mm/min)."),
     axes: str = typer.Option("X,Y", "--axes", help="The plane: two axis letters."),
     centre: str = typer.Option("0,0", "--centre", help="Circle centre in the plane, mm."),
+    center: Optional[str] = typer.Option(None, "--center", hidden=True),  # the other spelling, kept working
     against: List[Path] = typer.Option([], "--against", help="Recordings of the same test (ccw and cw): overlay measured."),
     report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
@@ -26,13 +27,14 @@ def ballbar(
 
     Example: agent ballbar --machine result.json --radius 100 --feed 16.67 --report ballbar.html
     """
-    from agent.outputs import check_suffix, write_json
+    from agent.outputs import check_output, write_json
     from agent.workflows.predict import load_machines
     from core.reader import load_recording
     from ident.synthetic_ballbar import run_ballbar
 
-    check_suffix(json_out, "--json", ".json")
-    check_suffix(report, "--report", ".html")
+    check_output(json_out, "--json", ".json")
+    check_output(report, "--report", ".html")
+    centre = center or centre
     plane = tuple(a.strip().upper() for a in axes.split(",") if a.strip())
     try:
         c = tuple(float(v) for v in centre.split(","))

@@ -20,8 +20,11 @@ def capture(
 
     Example: agent capture --port serial:///dev/ttyUSB0?baud=921600 -o run.mcap
     """
+    from agent.outputs import check_output
     from core.errors import TransportError
     from drivers.capture import capture as run_capture
+
+    check_output(output, "-o")
 
     wanted = [a.strip() for a in axes.split(",") if a.strip()] if axes else None
     s = run_capture(port, output, axes=wanted, duration=duration, progress=not quiet)

@@ -37,7 +37,8 @@ def _axes(text: str) -> list[str]:
 
 def generate(
     axes: Optional[str] = typer.Option(None, "--axes", help="Axis letters, comma separated (default X; X,Y for a toolpath)."),
-    center: str = typer.Option("0", "--center", help="Centre of the travel range, mm: one value or one per axis (comma list)."),
+    centre: str = typer.Option("0", "--centre", help="Centre of the travel range, mm: one value or one per axis (comma list)."),
+    center: Optional[str] = typer.Option(None, "--center", hidden=True),  # the other spelling, kept working
     range_mm: float = typer.Option(10.0, "--range", help="Half-width of the travel range, mm: no target leaves centre ± range."),
     low_step: float = typer.Option(0.03, "--low-step", help="Largest step of the low-speed set, mm."),
     n_low: int = typer.Option(200, "--n-low", help="Number of moves in the low-speed set."),
@@ -57,14 +58,16 @@ def generate(
 
     Example: agent generate --axes X --dialect linuxcnc -o prog/
     """
+    from agent.validation import check_seed
     from gcode_gen.generator import generate as make_programs
     from gcode_gen.generator import save_programs
 
+    check_seed(seed)
     if not math.isfinite(feed) or feed <= 0:
         raise InputError(f"--feed must be a positive number of mm/s, got {feed}")
     default_axes = "X,Y" if toolpath is not None else "X"
     programs = make_programs(
-        _axes(axes or default_axes), center=_floats(center, "--center"), range_mm=range_mm,
+        _axes(axes or default_axes), center=_floats(center or centre, "--centre"), range_mm=range_mm,
         low_step=low_step, n_low=n_low, n_high=n_high, feed=feed, seed=seed, distribution=distribution,
         toolpath=toolpath, size=size, blending=blending, direction=direction.strip().lower(), start_deg=start_angle,
     )

@@ -22,12 +22,12 @@ def predict(
 
     Example: agent predict part.ngc --machine result.json --set X.a1=150 --report predicted.html
     """
-    from agent.outputs import check_suffix
+    from agent.outputs import check_output
     from agent.workflows.predict import load_machines, predict_files
 
-    check_suffix(json_out, "--json", ".json")
-    check_suffix(report, "--report", ".html")
-    check_suffix(out, "--out", ".mcap", ".csv")
+    check_output(json_out, "--json", ".json")
+    check_output(report, "--report", ".html")
+    check_output(out, "--out", ".mcap", ".csv")
     machines = load_machines(machine, set_)
     summaries, comparisons = predict_files(programs, machines, against=against, json_out=json_out,
                                            report=report, out=out)

@@ -34,8 +34,15 @@ def serve(
 
     Example: agent serve prog/ident_low.ngc prog/ident_high.ngc --transport serial
     """
-    from drivers.endpoints.serve import build_recording, endpoint_class, serve as run_serve
+    from agent.outputs import check_output
+    from agent.validation import check_machine, check_seed
     from drivers.endpoints.base import parse_endpoint_options
+    from drivers.endpoints.serve import build_recording, endpoint_class, serve as run_serve
+
+    check_seed(seed)
+    check_output(fault_log, "--fault-log", ".json")
+    if recording is None:
+        check_machine(machine)
 
     options = parse_endpoint_options(endpoint_class(transport), list(opt))
     if linger is not None:

@@ -17,19 +17,24 @@ def simulate(
         None, "--machine", help="Machine preset name, TOML machine file, or the result JSON of agent identify "
                                 "(the identified drives; default: fadal-ppi)."),
     effect: List[str] = typer.Option(
-        [], "--effect", help="Add physics: NAME=VALUE or NAME=key:value,key:value (SPEC §7), repeatable."),
+        [], "--effect", help="Add physics: NAME=VALUE or NAME=key:value,key:value (docs/spec.md §7, docs/machine-file.md), repeatable."),
     seed: int = typer.Option(0, "--seed", help="Seed of the encoder noise."),
-    csv: Optional[Path] = typer.Option(None, "--csv", help="Also write the SPEC §4 CSV to this file."),
+    csv: Optional[Path] = typer.Option(None, "--csv", help="Also write the CSV of docs/recording-format.md to this file."),
 ) -> None:
     """Run PROGRAMs on the virtual CNC and write a recording in exactly the format a capture writes.
 
     Example: agent simulate prog/ident_low.ngc prog/ident_high.ngc --machine fadal-pid -o run.mcap
     """
+    from agent.outputs import check_output
+    from agent.validation import check_seed
     from agent.workflows.predict import is_identified_machine
     from core.writer import write_recording_csv, write_recording_mcap
 
     if out.suffix.lower() != ".mcap":
         raise InputError(f"-o {out}: the log must be a .mcap file (use --csv for CSV)")
+    check_seed(seed)
+    check_output(out, "-o")
+    check_output(csv, "--csv", ".csv")
     if is_identified_machine(machine):
         from ident.virtual_machine import load_virtual_machine
 
@@ -41,7 +46,10 @@ def simulate(
             typer.echo(f"warning: {w}", err=True)
         rec = prediction.recording
     else:
+        from agent.validation import check_machine
         from virtual_cnc import simulate as run_programs
+
+        check_machine(machine)
 
         rec = run_programs(programs, machine=machine, effects=effect, seed=seed)
     write_recording_mcap(rec, out)

@@ -25,6 +25,7 @@ def identify_files(path: Path, *, validate: Path | None = None, against: Path | 
         validate=load_recording(validate) if validate is not None else None,
         against=load_recording(against) if against is not None else None,
         prior=load_models(model) if model is not None else None,
+        prior_source=Path(model).name if model is not None else None,
         **options,
     )
     if against is not None:  # named in the summary, report and JSON ("recording.against")

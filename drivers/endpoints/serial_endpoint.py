@@ -189,6 +189,8 @@ class SerialEndpoint(Endpoint):
 
     def _wait_for_reader(self) -> bool:
         """Block until a capture has opened the port; False if told to stop."""
+        if not self._reader_present():  # say what it waits for: a silent wait looks like a hang
+            print(f"waiting for a client on {os.ttyname(self._slave)} ({self.link})", file=sys.stderr, flush=True)
         while not self._reader_present():
             if self.stop_event.wait(0.01):
                 return False

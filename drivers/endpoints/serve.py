@@ -4,7 +4,7 @@ Steps: build the :class:`~core.recording.Recording` (the G-code programs through
 :func:`virtual_cnc.machine_run.simulate`, or an existing log given with
 ``recording=``), wrap it in a :class:`~drivers.endpoints.source.RealTimeSource` with the
 fault plan, pick the transport's endpoint from :data:`ENDPOINTS`, start it, print
-``port: <url>`` as the FIRST line of stdout (flushed: a test or script reads it to know
+``port: <url>`` (shell-quoted where the URL needs it) as the FIRST line of stdout (flushed: a test or script reads it to know
 where to capture from), write the fault log, serve, and on the way out rewrite the
 fault log with what the endpoint did (ticks not sent because of a disconnect, and a
 timeline of what had been sent when).
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import shlex
 import signal
 import sys
 import threading
@@ -120,7 +121,8 @@ def serve(
         url = endpoint.port_url()
         if speed != 1.0:  # the capture's clock check then expects this controller to run `speed` x real time
             url += f"{'&' if '?' in url else '?'}replay_speed={speed:g}"
-        print(f"port: {url}", file=stdout, flush=True)
+        # quoted for the shell: a URL's ? and & would break the pasted command line
+        print(f"port: {shlex.quote(url)}", file=stdout, flush=True)
         if fault_log:
             _write_json(fault_log, report)
         endpoint.run()
