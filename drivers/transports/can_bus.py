@@ -327,7 +327,7 @@ class CanDriver(Driver):
             self._dispatch[p.frame_id] = ("dbc", k, p.message, p.length, tuple(ax))
         self._sync_cob = layout.tick_id
         self._overflow = layout.modulus
-        unwrap = CounterUnwrapper(layout.modulus, 0, period, f"DBC counter ({layout.modulus} values)")
+        unwrap = CounterUnwrapper(layout.modulus, 0, period, f"DBC counter ({layout.modulus.bit_length() - 1} bits)")
         self._asm = TickAssembler(len(keep), len(parts), unwrap, period)
         self._bootup = {}
         self._mode = "dbc"

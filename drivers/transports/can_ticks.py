@@ -45,9 +45,11 @@ class CounterError(StreamError):
     """The tick counter cannot be followed past this frame (a restart, or a silence the host clock cannot span)."""
 
 
-#: ticks a frame may arrive before the envelope before its counter is "ahead of the clock"
+#: a frame is numbered with the largest advance that makes it at most this early (ticks)
 EARLY_TICKS = 0.5
-#: lateness (ticks) always allowed, also before any jitter was seen
+#: how early (ticks) the first frame after a silence may be before the host clock is in doubt
+EARLY_AT_SILENCE = 0.25
+#: distance from the envelope (ticks) always allowed, also before any jitter was seen
 MIN_ALLOWED_LATENESS = 0.5
 #: the jitter a frame's lateness is compared with decays with this time constant (s)
 JITTER_MEMORY_S = 2.0
@@ -85,6 +87,8 @@ class CounterUnwrapper:
     _jitter: float = 0.0  # decaying maximum of the lateness behind the envelope, ticks
     _start: tuple[float, int] = (0.0, 0)  # (host time, counter) of the first tick
     _confirm_until: float = -math.inf  # ticks opened before this host time are unconfirmed
+    _window_allowed: float = MIN_ALLOWED_LATENESS  # allowed distance from the envelope until then
+    _confirmed_u: int = 0  # the last tick before that silence
 
     def host_period(self) -> float:
         """Host seconds per controller tick: the nominal period, or for a stream that does not run
@@ -96,15 +100,18 @@ class CounterUnwrapper:
                 return measured
         return self.period_s
 
-    def _trusts_counter(self, host_period: float) -> bool:
-        """A counter is taken as it reads (no wraps from host time, no restart check) until the
-        stream's rate is known, and for a stream that does not run at its controller's period: a
-        replay (``agent serve --speed``, a trace played into an adapter), whose host times are
-        not the controller's clock."""
-        if self.modulus == 1:
-            return False
+    def _replay(self, host_period: float) -> bool:
+        """Whether the stream is known not to run at its controller's period: a replay (``agent
+        serve --speed``, a trace played into an adapter), whose host times are not the
+        controller's clock.  Its counter is taken as it reads."""
+        return self.modulus > 1 and host_period != self.period_s
+
+    def _maybe_replay(self, ts: float) -> bool:
+        """Before the rate is established: too few ticks to tell, or arriving > 25 % off the period."""
         span = (self._u or 0) - self._start[1]
-        return span < ESTABLISH_TICKS or host_period != self.period_s
+        if span >= ESTABLISH_TICKS:
+            return False
+        return span < 10 or abs((ts - self._start[0]) / span / self.period_s - 1) > 0.25
 
     @property
     def unconfirmed_until(self) -> float:
@@ -126,18 +133,24 @@ class CounterUnwrapper:
         M = self.modulus
         d0 = (r - self._last_raw) % M
         Th = self.host_period()
-        if self._trusts_counter(Th):
-            if d0 == 0:
-                return None  # the same value again right away: a repeated frame
+        if self._replay(Th):
             a = d0
         else:
-            a = self._advance(d0, ts, Th)
-            if a == 0:
-                return None
+            try:
+                a = self._advance(d0, ts, Th)
+            except CounterError:
+                if self.modulus == 1 or not self._maybe_replay(ts):
+                    raise
+                a = d0  # a replay cannot be told from a restart before its rate is known
+        if a == 0:
+            return None  # the same value again right away: a repeated frame
         dt = ts - self._ts
-        env = min(self._env + a * Th + ENVELOPE_LEAK * min(dt, 10 * Th), ts)
-        late = (ts - env) / Th
-        self._jitter = max(late, self._jitter * math.exp(-max(dt, 0.0) / JITTER_MEMORY_S))
+        predicted = self._env + a * Th + ENVELOPE_LEAK * min(dt, 10 * Th)
+        env = min(predicted, ts)
+        # a frame later than the envelope shows jitter; so does one earlier than it: the
+        # frames the envelope was drawn through were late by that much
+        spread = abs(ts - predicted) / Th
+        self._jitter = max(spread, self._jitter * math.exp(-max(dt, 0.0) / JITTER_MEMORY_S))
         self._u += a
         self._last_raw, self._ts, self._env = r, ts, env
         return self._u
@@ -147,26 +160,36 @@ class CounterUnwrapper:
         M = self.modulus
         h = (ts - self._env) / Th  # ticks since the last tick, if this frame is not delayed
         base = d0 if d0 or M > 1 else 1  # the fewest ticks the counter allows (0: a repeat)
-        if base > h + EARLY_TICKS:
+        # how far off the envelope a frame may be; while ticks numbered across a silence are not
+        # yet confirmed, as it was then: frames that come early under that numbering would
+        # otherwise widen it themselves
+        allowed = self._window_allowed if ts < self._confirm_until else max(2 * self._jitter, MIN_ALLOWED_LATENESS)
+        if base > h + allowed:
             raise CounterError(self._ahead_message(d0, ts, h))
-        n = int((h + EARLY_TICKS - base) // M)
+        n = max(0, int((h + EARLY_TICKS - base) // M))
         a = base + n * M
         if n >= 1:
             late = h - a  # how late the frame is behind the envelope if a ticks passed
-            allowed = max(2 * self._jitter, MIN_ALLOWED_LATENESS)
-            if late > allowed or late + M <= allowed:
+            # resolved only if this frame is on the envelope as closely as frames have been, and
+            # the next fewer wraps would make it later than any frame has been
+            if late > allowed or late < -max(EARLY_AT_SILENCE, self._jitter) or late + M <= allowed:
                 raise CounterError(self._ambiguous_message(a, late, allowed, ts, Th))
             # a stall of the sender longer than a wrap would look the same until the frames it
             # held back arrive in a burst: keep this tick back until they would have
-            self._confirm_until = ts + (allowed + 2) * Th
+            self._confirm_until, self._window_allowed = ts + (allowed + 2) * Th, allowed
+            self._confirmed_u = self._u
         return a
 
     def _ahead_message(self, d0: int, ts: float, h: float) -> str:
         gap_ms = (ts - self._ts) * 1e3
+        if ts < self._confirm_until:
+            return (f"frames arrive faster than the sample period after a silence spanning a wrap of the "
+                    f"{self.what}: the sender held them back longer than a wrap, which the host clock cannot "
+                    f"tell from a silence (after counter {self._confirmed_u}); the log ends there")
         if self.modulus == 1:
-            return (f"a {self.what} arrived {gap_ms:.2f} ms after the previous one, less than half the sample "
-                    f"period ({self.period_s * 1e3:g} ms) after it was due: the host receive times jitter too much "
-                    f"to number {self.what}s by arrival (after counter {self._u}); the log ends there")
+            return (f"a {self.what} arrived {gap_ms:.2f} ms after the previous one, before the next was due "
+                    f"({self.period_s * 1e3:g} ms period): the host receive times jitter too much to number "
+                    f"ticks by arrival (after counter {self._u}); the log ends there")
         return (f"the {self.what} jumped by {d0} ({self._last_raw + self.first} -> "
                 f"{(self._last_raw + d0) % self.modulus + self.first}) in {gap_ms:.1f} ms, where at most "
                 f"{max(h, 0):.1f} sample periods passed: the controller restarted or its counter was reset "
@@ -174,11 +197,12 @@ class CounterUnwrapper:
 
     def _ambiguous_message(self, a: int, late: float, allowed: float, ts: float, Th: float) -> str:
         gap_ms = (ts - self._ts) * 1e3
-        wrap = f"{self.modulus} values, {self.modulus * Th * 1e3:g} ms per wrap" if self.modulus > 1 else \
-            f"no counter, {Th * 1e3:g} ms per tick"
-        return (f"after {gap_ms:.1f} ms without a {self.what} ({wrap}) the host clock cannot tell how many ticks "
-                f"passed ({a} or {a - self.modulus}): frames arrive up to {self._jitter * Th * 1e3:.2f} ms late "
-                f"and this one would be {late * Th * 1e3:.2f} ms late (after counter {self._u}); the log ends there")
+        wraps = f"the {self.what} wraps every {self.modulus * Th * 1e3:g} ms" if self.modulus > 1 else \
+            f"a {self.what} says nothing of it"
+        return (f"the host clock cannot tell how many ticks passed ({a} or {a - self.modulus}) in the "
+                f"{gap_ms:.1f} ms since the last tick: {wraps}, frames arrive up to "
+                f"{self._jitter * Th * 1e3:.2f} ms late and this one would be {late * Th * 1e3:+.2f} ms off "
+                f"(after counter {self._u}); the log ends there")
 
 
 @dataclass
@@ -207,6 +231,7 @@ class TickAssembler:
     _mask: int = 0
     _emitted: bool = True
     _orphan_counted: bool = False
+    _orphan_mask: int = 0
     _hold: bool = False  # the current tick waits for the host clock to be confirmed
     _held: list[Sample] = field(default_factory=list)
     _cmd: list[float] = field(default_factory=list)
@@ -239,7 +264,7 @@ class TickAssembler:
         self._counter = u
         self._mask = 0
         self._emitted = False
-        self._orphan_counted = False
+        self._orphan_counted, self._orphan_mask = False, 0
         self._hold = ts < self.unwrap.unconfirmed_until
         if self._held and not self._hold:
             return self.release()
@@ -253,9 +278,10 @@ class TickAssembler:
         bit = 1 << index
         if self._counter is None or self._emitted or self._mask & bit:
             self.orphan_parts += 1
-            if not self._orphan_counted:
+            if not self._orphan_counted or self._orphan_mask & bit:  # a part again: another tick's
                 self.orphan_ticks += 1
-                self._orphan_counted = True
+                self._orphan_counted, self._orphan_mask = True, 0
+            self._orphan_mask |= bit
             return None
         self._mask |= bit
         for axis, cmd, act in values:
