@@ -18,8 +18,8 @@ axes       axis names in node (or DBC) order; default X,Y,Z,A,B,C...
 status     node id of the controller's program-status node (0x2100, end of program and
            segment); 0 = none: the capture then ends on --duration, Ctrl-C or silence
 eds        EDS of the axis nodes (default fixtures/can/cia402_axis.eds)
-scale      position increments per mm (deg), one value or one per axis (default 10000:
-           0.1 um per increment); mm = increments / scale
+scale      position units of 0x6062/0x6064 (CiA 402 user-defined units) per mm (deg), one
+           value or one per axis (default 10000: 0.1 um units); mm = value / scale
 sdo        1 (default): read the TPDO mapping, 0x1019 and 0x1006 from each drive by SDO
            upload; 0: take them from the EDS
 sync       0 (default): only listen; 1: the agent is the SYNC producer at ``period``
@@ -37,10 +37,14 @@ What the driver sends (SPEC §8, passive capture): with ``sdo=1`` SDO *upload* r
 ``sync=1`` the SYNC frame (COB-ID 0x80, counter byte).  Never NMT commands, RPDOs or
 SDO downloads.
 
-Sample counter: the CiA 301 SYNC counter (1..0x1019 overflow, 240 by default),
-unwrapped by :class:`~drivers.transports.can_ticks.CounterUnwrapper`; a tick whose SYNC
-or any axis TPDO is missing is a drop, a TPDO whose length differs from its mapping
-is corrupt (counted, never decoded).
+Sample counter: the CiA 301 SYNC counter (1..0x1019 overflow, 240 by default; none when
+the drive has no 0x1019), numbered with the host receive times by
+:class:`~drivers.transports.can_ticks.CounterUnwrapper`; a tick whose SYNC or any axis
+TPDO is missing is a drop, a TPDO whose length differs from its mapping is corrupt
+(counted, never decoded).  A restart (the counter jumps back, an NMT boot-up message) or a
+silence the host clock cannot span stops the capture with one line (docs/can.md).
+Opening waits up to ``timeout`` for the first frame the capture reads, so a silent bus
+fails before any log is written.
 """
 
 from __future__ import annotations
@@ -69,7 +73,7 @@ for _name in ("canopen", "can", "cantools"):
 
 __all__ = ["CanDriver", "DEFAULT_SCALE", "DEFAULT_AXES", "explain_bus_error"]
 
-DEFAULT_SCALE = 10_000.0  # position increments per mm (deg): 0.1 um per increment
+DEFAULT_SCALE = 10_000.0  # position units per mm (deg): a drive set up for 0.1 um units
 DEFAULT_AXES = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
 _DEFAULT_CHANNEL = {"udp_multicast": "239.74.163.2", "virtual": "channel0"}
 RECV_BUFFER_BYTES = 8 << 20  # requested udp_multicast socket buffer (the kernel caps it at rmem_max)
@@ -298,7 +302,7 @@ class CanDriver(Driver):
             units=("mm",) * len(axes),
             extra={"transport": "can", "protocol": "canopen", "interface": self.interface, "channel": self.channel,
                    "nodes": [nodes[i] for i in keep], "status_node": status_id or None,
-                   "increments_per_mm": [scales[i] for i in keep], "sync_counter_overflow": sync.overflow,
+                   "position_units_per_mm": [scales[i] for i in keep], "sync_counter_overflow": sync.overflow,
                    "sync_producer": "capture" if url.option("sync", bool, False) else "controller",
                    "mapping_from": "sdo" if use_sdo else "eds"},
         )
@@ -493,7 +497,7 @@ class CanDriver(Driver):
                 "against the ids the drives send with")
 
     def position_hint(self, axis: str) -> str:
-        return f"the scale= of axis {axis} (increments per mm) or its DBC factor"
+        return f"the scale= of axis {axis} (position units per mm) or its DBC factor"
 
     def _close(self) -> None:
         self._sync_stop.set()
