@@ -373,7 +373,9 @@ def test_a_sync_counter_that_restarts_stops_the_capture_at_the_restart(tmp_path)
     ticks = Ticks(1500, 0.001, counter=lambda k: k % 240 + 1 if k < 700 else (k - 700) % 240 + 1,
                   late=small_jitter(6, 0.0001))
     summary, log = VirtualPeer(eds).record(canopen_query(), canopen_wire(ticks), tmp_path)
-    k = assert_stopped(summary, log, ticks, "the controller restarted or its counter was reset (after counter 699)")
+    k = assert_stopped(summary, log, ticks, "jumped by 21 (220 -> 1)")
+    assert "the controller restarted or its counter was reset" in summary.error
+    assert "(after counter 699); the log ends there" in summary.error
     assert k[-1] == 699
 
 
@@ -381,7 +383,8 @@ def test_a_restart_early_in_the_capture_is_caught_too(tmp_path):
     eds = axis_eds(tmp_path / "drive.eds", overflow=240, period_us=1000)
     ticks = Ticks(600, 0.001, counter=lambda k: k % 240 + 1 if k < 50 else (k - 50) % 240 + 1)
     summary, log = VirtualPeer(eds).record(canopen_query(), canopen_wire(ticks), tmp_path)
-    k = assert_stopped(summary, log, ticks, "restarted or its counter was reset (after counter 49)")
+    k = assert_stopped(summary, log, ticks, "jumped by 191 (50 -> 1)")
+    assert "(after counter 49); the log ends there" in summary.error
     assert k[-1] == 49
 
 
@@ -527,7 +530,9 @@ def test_agent_capture_of_a_restarting_controller_exits_1_with_one_line(tmp_path
         res = agent_capture(peer.url(eds=eds), tmp_path)
     finally:
         peer.close()
-    assert "the controller restarted or its counter was reset (after counter 699)" in one_error_line(res)
+    line = one_error_line(res)
+    assert "jumped by 21 (220 -> 1)" in line and "restarted or its counter was reset" in line, line
+    assert "(after counter 699)" in line
     log = load_recording(tmp_path / "log.mcap")
     k = assert_every_sample_exact(log, ticks.period)
     assert k[-1] == 699 and log.metadata["summary"]["end"] == "unusable data"
@@ -539,4 +544,16 @@ def test_agent_capture_on_a_silent_bus_exits_1_with_one_line_and_no_file(tmp_pat
     res = agent_capture(f"can://udp_multicast/239.74.163.{random.randint(2, 254)}?port={random.randint(20000, 60000)}"
                         "&ttl=0&node=1&sdo=0&timeout=0.5", tmp_path)
     assert "nothing is sending on this bus" in one_error_line(res)
+    assert not (tmp_path / "log.mcap").exists()
+
+
+def test_a_bus_with_only_the_status_node_talking_is_a_silent_bus(tmp_path):
+    """A program-status node reporting "idle" makes no samples: no SYNC or TPDO within the timeout is
+    one error before anything is written, naming the frames seen and the ones expected."""
+    w = Wire()
+    for i in range(40):
+        w.send(T0 + 0.01 * i, 0x180 + STATUS_NODE, struct.pack("<HB", 0, 0))
+    peer = VirtualPeer()
+    with pytest.raises(TransportTimeout, match=r"none the capture reads \(ids seen: 0x1C0; expected 0x80, 0x181\)"):
+        peer.record(f"node=1&sdo=0&status={STATUS_NODE}&timeout=0.3", w, tmp_path)
     assert not (tmp_path / "log.mcap").exists()

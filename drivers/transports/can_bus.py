@@ -194,8 +194,10 @@ class CanDriver(Driver):
         return info
 
     def _relevant(self, msg: can.Message) -> bool:
-        """Whether a frame is one the capture reads (SYNC / counter frame, a mapped PDO, the status PDO)."""
-        return msg.arbitration_id == self._sync_cob or msg.arbitration_id in self._dispatch
+        """Whether a frame carries ticks (the SYNC or counter frame, a position PDO or DBC frame): the
+        frames whose absence is a silent bus (a status node alone makes no samples)."""
+        cob = msg.arbitration_id
+        return cob == self._sync_cob or self._dispatch.get(cob, ("status",))[0] != "status"
 
     def _await_first_frame(self) -> None:
         """Wait up to ``timeout`` for the first frame the capture reads, so that a silent bus is a
@@ -227,7 +229,7 @@ class CanDriver(Driver):
             "interface, channel and port, and that the drives run)")
 
     def _expected_ids(self) -> str:
-        ids = sorted({self._sync_cob, *self._dispatch})
+        ids = sorted({self._sync_cob, *(cob for cob, entry in self._dispatch.items() if entry[0] != "status")})
         return ", ".join(f"0x{i:X}" for i in ids)
 
     def _open_canopen(self) -> StreamInfo:
@@ -418,7 +420,8 @@ class CanDriver(Driver):
                     f"(after counter {asm.counter}); the log ends there")
             if cob != self._sync_cob and cob not in dispatch:
                 continue
-            self._last_rx = time.monotonic()
+            if self._relevant(msg):
+                self._last_rx = time.monotonic()
             # Silence measured on the receive timestamps (kernel time for udp_multicast), so a
             # capture loop that was busy for a while does not look like a silent bus.
             ts = msg.timestamp

@@ -84,10 +84,11 @@ class CounterUnwrapper:
     _u: int | None = None  # unwrapped counter of the last tick
     _ts: float = 0.0  # its host receive time
     _env: float = 0.0  # envelope: host time tick _u arrives at when nothing delays it
-    _jitter: float = 0.0  # decaying maximum of the lateness behind the envelope, ticks
+    _jitter: float = 0.0  # decaying maximum of the distance from the envelope, ticks
+    _slack: float = 0.0  # decaying maximum of how early frames came, ticks (how far off the envelope was)
     _start: tuple[float, int] = (0.0, 0)  # (host time, counter) of the first tick
     _confirm_until: float = -math.inf  # ticks opened before this host time are unconfirmed
-    _window_allowed: float = MIN_ALLOWED_LATENESS  # allowed distance from the envelope until then
+    _window_early: float = MIN_ALLOWED_LATENESS  # how early a frame may be until then, ticks
     _confirmed_u: int = 0  # the last tick before that silence
 
     def host_period(self) -> float:
@@ -148,9 +149,13 @@ class CounterUnwrapper:
         predicted = self._env + a * Th + ENVELOPE_LEAK * min(dt, 10 * Th)
         env = min(predicted, ts)
         # a frame later than the envelope shows jitter; so does one earlier than it: the
-        # frames the envelope was drawn through were late by that much
-        spread = abs(ts - predicted) / Th
-        self._jitter = max(spread, self._jitter * math.exp(-max(dt, 0.0) / JITTER_MEMORY_S))
+        # frames the envelope was drawn through were late by that much.  Frames of a live
+        # controller are never early, so earliness says only how far off the envelope was
+        # (it was drawn through late first frames, say) and is kept apart.
+        off = (ts - predicted) / Th
+        decay = math.exp(-max(dt, 0.0) / JITTER_MEMORY_S)
+        self._jitter = max(abs(off), self._jitter * decay)
+        self._slack = max(-off, self._slack * decay)
         self._u += a
         self._last_raw, self._ts, self._env = r, ts, env
         return self._u
@@ -160,11 +165,21 @@ class CounterUnwrapper:
         M = self.modulus
         h = (ts - self._env) / Th  # ticks since the last tick, if this frame is not delayed
         base = d0 if d0 or M > 1 else 1  # the fewest ticks the counter allows (0: a repeat)
-        # how far off the envelope a frame may be; while ticks numbered across a silence are not
-        # yet confirmed, as it was then: frames that come early under that numbering would
-        # otherwise widen it themselves
-        allowed = self._window_allowed if ts < self._confirm_until else max(2 * self._jitter, MIN_ALLOWED_LATENESS)
-        if base > h + allowed:
+        allowed = max(2 * self._jitter, MIN_ALLOWED_LATENESS)  # how late a frame may be
+        # How early: by as much as the envelope has been off.  In the first ticks it may still be
+        # drawn through frames that were all late: by as much as frames have been late.  While
+        # ticks numbered across a silence are not yet confirmed, as it was then (frames that come
+        # early under that numbering would otherwise widen it themselves).
+        window = ts < self._confirm_until
+        if window:
+            early = self._window_early
+        else:
+            young = (self._u or 0) - self._start[1] < ESTABLISH_TICKS
+            early = max(2 * self._slack, 2 * self._jitter if young else 0.0, MIN_ALLOWED_LATENESS)
+        # the next counter value is never "ahead": frames a sender held back arrive in a burst,
+        # and a restart that lands on the next value mislabels nothing (unless a silence was
+        # just bridged: then the burst is what shows it was a stall)
+        if base > h + early and (base != 1 or window or M == 1):
             raise CounterError(self._ahead_message(d0, ts, h))
         n = max(0, int((h + EARLY_TICKS - base) // M))
         a = base + n * M
@@ -172,11 +187,11 @@ class CounterUnwrapper:
             late = h - a  # how late the frame is behind the envelope if a ticks passed
             # resolved only if this frame is on the envelope as closely as frames have been, and
             # the next fewer wraps would make it later than any frame has been
-            if late > allowed or late < -max(EARLY_AT_SILENCE, self._jitter) or late + M <= allowed:
+            if late > allowed or late < -max(EARLY_AT_SILENCE, self._slack) or late + M <= allowed:
                 raise CounterError(self._ambiguous_message(a, late, allowed, ts, Th))
             # a stall of the sender longer than a wrap would look the same until the frames it
             # held back arrive in a burst: keep this tick back until they would have
-            self._confirm_until, self._window_allowed = ts + (allowed + 2) * Th, allowed
+            self._confirm_until, self._window_early = ts + (allowed + 2) * Th, early
             self._confirmed_u = self._u
         return a
 
@@ -192,8 +207,8 @@ class CounterUnwrapper:
                     f"ticks by arrival (after counter {self._u}); the log ends there")
         return (f"the {self.what} jumped by {d0} ({self._last_raw + self.first} -> "
                 f"{(self._last_raw + d0) % self.modulus + self.first}) in {gap_ms:.1f} ms, where at most "
-                f"{max(h, 0):.1f} sample periods passed: the controller restarted or its counter was reset "
-                f"(after counter {self._u}); the log ends there")
+                f"{max(h, 0):.1f} sample periods passed: the controller restarted or its counter was reset, or "
+                f"its frames arrive more unevenly than so far (after counter {self._u}); the log ends there")
 
     def _ambiguous_message(self, a: int, late: float, allowed: float, ts: float, Th: float) -> str:
         gap_ms = (ts - self._ts) * 1e3
