@@ -7,12 +7,13 @@ position frames.  This module knows nothing of either: it is told "a tick opened
 counter c at host time ts" and "part p of the current tick arrived with these axis
 values", and it emits a :class:`Sample` as soon as every part of a tick is in.
 
-Numbering ticks (docs/can.md, "Sample counter"): a wrapping counter says how many ticks
-passed only modulo its number of values M (a counterless SYNC says nothing: M = 1).  The
-host receive times say the rest.  :class:`CounterUnwrapper` keeps the *envelope*, the
-host time at which each tick arrives when nothing delays it (the earliest line through
-the receive times), and the jitter, how late frames have arrived behind it.  The advance
-of a new frame is the largest one the counter allows that does not make the frame early;
+Numbering ticks (docs/can.md, "Numbering ticks across silences"): a wrapping counter says
+how many ticks passed only modulo its number of values M (a counterless SYNC says nothing:
+M = 1).  The host receive times say the rest.  :class:`CounterUnwrapper` keeps the
+*envelope*, the host time at which each tick arrives when nothing delays it (the earliest
+line through the receive times), the *jitter* (how far frames have been off it) and the
+*slack* (how early frames have come: how far off the envelope itself was).  The advance of
+a new frame is the largest one the counter allows that does not make the frame early;
 when fewer wraps are also plausible (the frame would then be late by a whole wrap, and
 frames have been that late), or the frame is later than any jitter seen, it says so
 (:class:`CounterError`) instead of guessing.  A counter that advances further than the
@@ -55,7 +56,9 @@ MIN_ALLOWED_LATENESS = 0.5
 JITTER_MEMORY_S = 2.0
 #: how fast the envelope may drift later (s per s), for host and controller clock rates
 ENVELOPE_LEAK = 1e-4
-#: ticks before the stream's own rate is known; until then a counter is taken as it reads
+#: ticks before the stream's own rate is known; until then the controller's period is assumed,
+#: a doubt is reported only when the stream so far runs near it, and frames may be as early
+#: as they have been late (the envelope may still be drawn through late first frames)
 ESTABLISH_TICKS = 100
 #: a stream whose measured period is further than this from the controller's does not run at
 #: its controller's clock (a replay); a live controller is within parts per million
