@@ -201,9 +201,10 @@ class CounterUnwrapper:
     def _ahead_message(self, d0: int, ts: float, h: float) -> str:
         gap_ms = (ts - self._ts) * 1e3
         if ts < self._confirm_until:
-            return (f"frames arrive faster than the sample period after a silence spanning a wrap of the "
-                    f"{self.what}: the sender held them back longer than a wrap, which the host clock cannot "
-                    f"tell from a silence (after counter {self._confirmed_u}); the log ends there")
+            return (f"frames arrive faster than the sample period right after {self._u - self._confirmed_u} "
+                    f"ticks were counted across a silence ({self.what}): the sender had held them back, which "
+                    f"the host clock cannot tell from a silence (after counter {self._confirmed_u}); the log "
+                    f"ends there")
         if self.modulus == 1:
             return (f"a {self.what} arrived {gap_ms:.2f} ms after the previous one, before the next was due "
                     f"({self.period_s * 1e3:g} ms period): the host receive times jitter too much to number "
