@@ -62,7 +62,7 @@ import can
 from core.errors import InputError, TransportError, TransportTimeout
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.transports import canopen_map as com
-from drivers.transports.can_ticks import CounterError, CounterUnwrapper, TickAssembler
+from drivers.transports.can_ticks import ControllerRestart, CounterError, CounterUnwrapper, TickAssembler
 
 # A library's loggers report to the application's handlers only: without one, Python's
 # last-resort handler would print canopen's own "Transfer aborted by client ..." next to
@@ -415,7 +415,7 @@ class CanDriver(Driver):
                 continue
             cob = msg.arbitration_id
             if cob in self._bootup and msg.dlc == 1 and msg.data[0] == 0 and asm.counter is not None:
-                raise CounterError(
+                raise ControllerRestart(
                     f"node {self._bootup[cob]} sent its NMT boot-up message (0x{cob:X}): it restarted "
                     f"(after counter {asm.counter}); the log ends there")
             if cob != self._sync_cob and cob not in dispatch:
@@ -492,7 +492,9 @@ class CanDriver(Driver):
 
     def unusable_reason(self) -> str:
         asm = self._asm
-        if asm is not None and asm.orphan_ticks > asm.incomplete_ticks:
+        if asm is None or not asm.skipped_ticks:
+            return ""
+        if asm.orphan_ticks > asm.incomplete_ticks:
             opener = "counter frame" if self._mode == "dbc" else f"SYNC (COB-ID 0x{self._sync_cob:X}, from 0x1005)"
             return (f"position frames that no {opener} came before; check that the controller sends it "
                     f"{'(the DBC frame with the counter signal)' if self._mode == 'dbc' else 'and 0x1005'}")

@@ -17,8 +17,8 @@ a new frame is the largest one the counter allows that does not make the frame e
 when fewer wraps are also plausible (the frame would then be late by a whole wrap, and
 frames have been that late), or the frame is later than any jitter seen, it says so
 (:class:`CounterError`) instead of guessing.  A counter that advances further than the
-host time allows (it jumped back: the controller restarted) is a :class:`CounterError`
-too.  One frame repeated (same counter, no time passed) is ignored.  Ticks numbered
+host time allows (it jumped back: the controller restarted) is a
+:class:`ControllerRestart`.  One frame repeated (same counter, no time passed) is ignored.  Ticks numbered
 across a silence of more than a wrap are held back until later frames have confirmed
 the host clock, so a wrongly numbered tick is never emitted.
 
@@ -39,11 +39,15 @@ from dataclasses import dataclass, field
 from core.errors import StreamError
 from drivers.base import Sample
 
-__all__ = ["TickAssembler", "CounterUnwrapper", "CounterError"]
+__all__ = ["TickAssembler", "CounterUnwrapper", "CounterError", "ControllerRestart"]
 
 
 class CounterError(StreamError):
     """The tick counter cannot be followed past this frame (a restart, or a silence the host clock cannot span)."""
+
+
+class ControllerRestart(CounterError):
+    """The controller restarted: its counter jumped back, or a node sent its NMT boot-up message."""
 
 
 #: a frame is numbered with the largest advance that makes it at most this early (ticks)
@@ -183,7 +187,9 @@ class CounterUnwrapper:
         # and a restart that lands on the next value mislabels nothing (unless a silence was
         # just bridged: then the burst is what shows it was a stall)
         if base > h + early and (base != 1 or window or M == 1):
-            raise CounterError(self._ahead_message(d0, ts, h))
+            # without a counter, or right after a bridged silence, it is the receive times that jitter
+            kind = CounterError if window or M == 1 else ControllerRestart
+            raise kind(self._ahead_message(d0, ts, h))
         n = max(0, int((h + EARLY_TICKS - base) // M))
         a = base + n * M
         if n >= 1:
