@@ -39,6 +39,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -188,8 +189,12 @@ def can_frame_rate(seconds: float, protocol: str) -> float:
                                                  "protocol": protocol, "linger": 0})
     ep.start()
     drv = open_driver(ep.port_url() + ("&sdo=0" if protocol == "canopen" else ""))
-    drv.open()
+    opener = threading.Thread(target=drv.open)  # opening waits for the first frame
+    opener.start()
+    while drv._bus is None and opener.is_alive():
+        time.sleep(0.001)
     ep.run()  # speed=inf: every frame is queued in the driver's virtual bus now
+    opener.join()
     n = 0
     t0 = time.perf_counter()
     while not drv.ended:

@@ -61,6 +61,28 @@ class Served:
         self.url = self.ep.port_url()
         self.thread = threading.Thread(target=self.ep.run, daemon=True)
 
+    def open(self, drv):
+        """Open ``drv`` while the endpoint starts serving: the driver's open waits for the first
+        frame, and a DBC endpoint on `virtual` streams at once, so it starts once the driver's bus exists."""
+        result = {}
+
+        def opening() -> None:
+            try:
+                result["info"] = drv.open()
+            except BaseException as exc:  # noqa: BLE001 - re-raised in the test's thread
+                result["error"] = exc
+
+        opener = threading.Thread(target=opening, daemon=True)
+        opener.start()
+        t0 = time.monotonic()
+        while drv._bus is None and opener.is_alive() and time.monotonic() - t0 < 5:
+            time.sleep(0.001)
+        self.thread.start()
+        opener.join(10)
+        if "error" in result:
+            raise result["error"]
+        return result["info"]
+
     def __enter__(self) -> "Served":
         return self
 
@@ -81,8 +103,7 @@ def test_canopen_capture_equals_the_served_samples_exactly():
     rec = random_walk()
     with Served(rec) as srv:
         drv = open_driver(srv.url)
-        info = drv.open()  # reads the mapping by SDO; the endpoint starts on the 0x1006 read
-        srv.thread.start()
+        info = srv.open(drv)  # reads the mapping by SDO; the endpoint starts on the 0x1006 read
         out = read_all(drv)
         drv.close()
     assert info.axes == ("X", "Y") and info.sample_period == pytest.approx(0.001)
@@ -101,8 +122,7 @@ def test_dropped_and_corrupted_frames_are_counted_exactly_and_never_decoded():
     rec = random_walk(3000, "XYZ")
     with Served(rec, FaultPlan(drop_rate=0.02, corrupt_rate=0.02, seed=7)) as srv:
         drv = open_driver(srv.url)
-        drv.open()
-        srv.thread.start()
+        srv.open(drv)
         out = read_all(drv)
         drv.close()
         report = srv.source.fault_report()
@@ -124,8 +144,7 @@ def test_dbc_frames_decode_exactly_with_segments_and_end():
     with Served(rec, FaultPlan(corrupt_rate=0.01, seed=2), protocol="dbc", wait=False) as srv:
         assert "dbc=" in srv.url and "period=0.001" in srv.url
         drv = open_driver(srv.url)
-        drv.open()  # DBC: nothing to read from the controller; open before it streams
-        srv.thread.start()
+        srv.open(drv)  # DBC: nothing to read from the controller; the bus exists before it streams
         out = read_all(drv)
         drv.close()
         report = srv.source.fault_report()
@@ -142,8 +161,7 @@ def test_axes_subset_reads_only_those_nodes():
     rec = random_walk(500, "XYZ")
     with Served(rec) as srv:
         drv = open_driver(srv.url, ["Z", "X"])
-        info = drv.open()
-        srv.thread.start()
+        info = srv.open(drv)
         out = read_all(drv)
         drv.close()
     assert info.axes == ("Z", "X") and info.extra["nodes"] == [3, 1]
@@ -158,8 +176,7 @@ def test_the_driver_only_sends_sdo_upload_requests():
         chan = srv.url.split("/")[3].split("?")[0]
         monitor = can.Bus(interface="virtual", channel=chan)
         drv = open_driver(srv.url)
-        drv.open()
-        srv.thread.start()
+        srv.open(drv)
         read_all(drv)
         drv.close()
     frames = []
@@ -270,15 +287,22 @@ def test_garbage_datagrams_on_udp_multicast_count_as_corrupt_and_a_silent_bus_ti
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     drv = open_driver(f"can://udp_multicast/{group}?port={port}&nodes=1&sdo=0&timeout=0.3")
-    drv.open()
     tx = can.Bus(interface="udp_multicast", channel=group, port=port, hop_limit=0)
     raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     raw.setsockopt(socket.IPPROTO_IP, socket.IP_MULTICAST_TTL, 0)
-    try:
+
+    def send() -> None:  # once the driver has joined the group (its open waits for the first frame)
+        time.sleep(0.1)
+        raw.sendto(b"\x00not a CAN frame", (group, port))
         for k in range(3):
             tx.send(can.Message(arbitration_id=0x80, is_extended_id=False, data=[k + 1]))
             tx.send(can.Message(arbitration_id=0x181, is_extended_id=False, data=struct.pack("<ii", k, -k)))
-        raw.sendto(b"\x00not a CAN frame", (group, port))
+
+    sender = threading.Thread(target=send, daemon=True)
+    sender.start()
+    try:
+        drv.open()
+        sender.join(5)
         out = []
         with pytest.raises(TransportTimeout, match=r"no CAN frame for 0\.\d s"):
             for _ in range(40):
@@ -300,10 +324,9 @@ def test_slcan_adapter_over_a_pseudo_terminal():
     tty.setraw(slave)
     path = os.ttyname(slave)
     drv = open_driver(f"can://slcan/{path}?nodes=1,2&axes=X,Y&sdo=0&status=64")
-    info = drv.open()  # python-can writes "O\r" (open channel); the "adapter" here ignores commands
-    lines = []
+    ticks = []  # the adapter's lines of each 1 ms tick
     for k in range(300):
-        lines.append("t0801%02X" % (k % 240 + 1))  # SYNC with counter
+        lines = ["t0801%02X" % (k % 240 + 1)]  # SYNC with counter
         if k == 100:
             lines.append("t1C03010001")  # program status: segment 1, running
         for node in (1, 2):
@@ -311,11 +334,21 @@ def test_slcan_adapter_over_a_pseudo_terminal():
             if (k, node) == (120, 1):
                 payload = payload[:7]  # node 1's TPDO with 7 bytes: malformed, never decoded
             lines.append("t%03X%d%s" % (0x180 + node, len(payload), payload.hex().upper()))
-    lines.append("t1C03010002")  # program ended
-    data = ("\r".join(lines) + "\r").encode()
-    writer = threading.Thread(target=lambda: [os.write(master, data[i:i + 512]) for i in range(0, len(data), 512)],
-                              daemon=True)  # a pty holds only a few kB: write while the driver reads
+        ticks.append("".join(ln + "\r" for ln in lines).encode())
+    ticks.append(b"t1C03010002\r")  # program ended
+
+    def adapter() -> None:
+        got = b""
+        while b"O\r" not in got:  # python-can opens the channel: the adapter starts forwarding frames
+            got += os.read(master, 64)
+        t0 = time.monotonic()
+        for k in range(0, len(ticks), 5):  # as they appear on the bus: 1 ms apart, forwarded every 5 ms
+            time.sleep(max(0.0, t0 + (k + 4) * 0.001 - time.monotonic()))  # when its last tick is due
+            os.write(master, b"".join(ticks[k:k + 5]))
+
+    writer = threading.Thread(target=adapter, daemon=True)
     writer.start()
+    info = drv.open()  # python-can writes "O\r" (open channel); the "adapter" here ignores commands
     out = []
     t0 = time.monotonic()
     while not drv.ended and time.monotonic() - t0 < 10:
@@ -356,12 +389,34 @@ def test_the_endpoint_url_names_everything_a_capture_needs():
     assert url.endswith("&nodes=5,6,7&axes=X,Y,Z&status=9&scale=1000.0&period=0.0005")
 
 
-def test_a_bus_where_nothing_is_sent_is_a_clear_timeout():
+def test_a_bus_where_nothing_is_sent_is_a_clear_timeout_while_opening():
     drv = open_driver(f"can://virtual/empty-{uuid.uuid4().hex[:6]}?nodes=1&sdo=0&timeout=0.2")
-    drv.open()
     try:
-        with pytest.raises(TransportTimeout, match=r"no CAN frame in 0\.\d s on virtual empty-\w+: nothing is sending"):
-            for _ in range(20):
-                assert drv.read(0.05) == []
+        with pytest.raises(TransportTimeout, match=r"no CAN frame in 0\.2 s on virtual empty-\w+: nothing is sending"):
+            drv.open()
     finally:
         drv.close()
+
+
+def test_a_bus_carrying_only_other_frames_names_them_while_opening():
+    chan = f"others-{uuid.uuid4().hex[:6]}"
+    other = can.Bus(interface="virtual", channel=chan)
+    drv = open_driver(f"can://virtual/{chan}?nodes=1&sdo=0&timeout=0.3")
+    stop = threading.Event()
+
+    def chatter() -> None:
+        while not stop.is_set():
+            other.send(can.Message(arbitration_id=0x123, is_extended_id=False, data=[1, 2]))
+            time.sleep(0.01)
+
+    th = threading.Thread(target=chatter, daemon=True)
+    th.start()
+    try:
+        with pytest.raises(TransportTimeout, match=r"CAN frames arrive on virtual others-\w+ but in 0\.3 s none the "
+                                                   r"capture reads \(ids seen: 0x123; expected 0x80, 0x181\)"):
+            drv.open()
+    finally:
+        stop.set()
+        th.join(2)
+        drv.close()
+        other.shutdown()

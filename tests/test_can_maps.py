@@ -9,7 +9,7 @@ import pytest
 
 from core.errors import InputError
 from drivers.transports import canopen_map as com
-from drivers.transports.can_ticks import CounterUnwrapper, TickAssembler
+from drivers.transports.can_ticks import ControllerRestart, CounterError, CounterUnwrapper, TickAssembler
 from drivers.transports.dbc_map import DEFAULT_DBC, load_dbc, per_mm
 
 
@@ -132,3 +132,48 @@ def test_a_part_repeated_within_a_tick_is_ignored():
     assert asm.part(0, [(0, 1.0, 1.0)]) is None
     assert asm.part(0, [(0, 9.0, 9.0)]) is None  # its SYNC was lost: cannot be stamped
     assert asm.orphan_parts == 1
+
+
+def test_a_repeated_counter_value_is_a_repeat_not_a_wrap():
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    got = [u(k % 240 + 1, 0.001 * k) for k in range(300)]
+    assert u(300 % 240, 0.001 * 299 + 0.0002) is None  # tick 299's SYNC again
+    assert got == list(range(300)) and u(300 % 240 + 1, 0.3) == 300
+
+
+def test_without_a_counter_ticks_are_numbered_by_arrival_and_host_time():
+    u = CounterUnwrapper(1, first=1, period_s=0.002)
+    sent = [k for k in range(400) if k not in (5, 6, 200) and not 250 <= k < 400 - 50]
+    assert [u(0, 0.002 * k + 1e-5 * (k % 7)) for k in sent] == sent
+
+
+def test_a_counter_ahead_of_the_host_clock_is_a_restart():
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    for k in range(500):
+        u(k % 240 + 1, 0.001 * k)
+    with pytest.raises(ControllerRestart, match=r"jumped by 221 \(20 -> 1\) in 1\.0 ms.*restarted"):
+        u(1, 0.500)  # counter back to 1 one period later
+
+
+def test_a_silence_the_jitter_cannot_resolve_is_refused():
+    u = CounterUnwrapper(16, first=0, period_s=0.001)
+    for k in range(500):  # every 50 ticks the sender stalls 7 ms, then sends what it held
+        j = k % 50
+        u(k % 16, 0.001 * k + ((7 - j) * 0.00096 if j < 7 else 0.0))
+    k = 499 + 40  # after 40 ticks of silence: 40 or 24 ticks?
+    with pytest.raises(CounterError, match=r"cannot tell how many ticks passed \(40 or 24\)") as err:
+        u(k % 16, 0.001 * k)
+    assert not isinstance(err.value, ControllerRestart)
+
+
+def test_ticks_numbered_across_a_silence_are_held_until_later_frames_confirm_them():
+    asm = TickAssembler(1, 1, CounterUnwrapper(16, 0, 0.001), 0.001)
+    out, last_out = [], {}
+    for k in list(range(200)) + list(range(230, 240)):
+        out += asm.open_tick(k % 16, 0.001 * k)
+        s = asm.part(0, [(0, float(k), -float(k))])
+        out += [s] if s else []
+        last_out[k] = out[-1].counter
+    assert [last_out[k] for k in (230, 231, 232, 233)] == [199, 199, 199, 233]  # 2.5 periods on hold
+    assert [s.counter for s in out] == list(range(200)) + list(range(230, 240))
+    assert [s.commanded[0] for s in out][-10:] == [float(k) for k in range(230, 240)]

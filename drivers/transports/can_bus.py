@@ -18,8 +18,8 @@ axes       axis names in node (or DBC) order; default X,Y,Z,A,B,C...
 status     node id of the controller's program-status node (0x2100, end of program and
            segment); 0 = none: the capture then ends on --duration, Ctrl-C or silence
 eds        EDS of the axis nodes (default fixtures/can/cia402_axis.eds)
-scale      position increments per mm (deg), one value or one per axis (default 10000:
-           0.1 um per increment); mm = increments / scale
+scale      position units of 0x6062/0x6064 (CiA 402 user-defined units) per mm (deg), one
+           value or one per axis (default 10000: 0.1 um units); mm = value / scale
 sdo        1 (default): read the TPDO mapping, 0x1019 and 0x1006 from each drive by SDO
            upload; 0: take them from the EDS
 sync       0 (default): only listen; 1: the agent is the SYNC producer at ``period``
@@ -37,10 +37,14 @@ What the driver sends (SPEC §8, passive capture): with ``sdo=1`` SDO *upload* r
 ``sync=1`` the SYNC frame (COB-ID 0x80, counter byte).  Never NMT commands, RPDOs or
 SDO downloads.
 
-Sample counter: the CiA 301 SYNC counter (1..0x1019 overflow, 240 by default),
-unwrapped by :class:`~drivers.transports.can_ticks.CounterUnwrapper`; a tick whose SYNC
-or any axis TPDO is missing is a drop, a TPDO whose length differs from its mapping
-is corrupt (counted, never decoded).
+Sample counter: the CiA 301 SYNC counter (1..0x1019 overflow, 240 by default; none when
+the drive has no 0x1019), numbered with the host receive times by
+:class:`~drivers.transports.can_ticks.CounterUnwrapper`; a tick whose SYNC or any axis
+TPDO is missing is a drop, a TPDO whose length differs from its mapping is corrupt
+(counted, never decoded).  A restart (the counter jumps back, an NMT boot-up message) or a
+silence the host clock cannot span stops the capture with one line (docs/can.md).
+Opening waits up to ``timeout`` for the first frame the capture reads, so a silent bus
+fails before any log is written.
 """
 
 from __future__ import annotations
@@ -58,7 +62,7 @@ import can
 from core.errors import InputError, TransportError, TransportTimeout
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.transports import canopen_map as com
-from drivers.transports.can_ticks import CounterUnwrapper, TickAssembler
+from drivers.transports.can_ticks import ControllerRestart, CounterError, CounterUnwrapper, TickAssembler
 
 # A library's loggers report to the application's handlers only: without one, Python's
 # last-resort handler would print canopen's own "Transfer aborted by client ..." next to
@@ -69,7 +73,7 @@ for _name in ("canopen", "can", "cantools"):
 
 __all__ = ["CanDriver", "DEFAULT_SCALE", "DEFAULT_AXES", "explain_bus_error"]
 
-DEFAULT_SCALE = 10_000.0  # position increments per mm (deg): 0.1 um per increment
+DEFAULT_SCALE = 10_000.0  # position units per mm (deg): a drive set up for 0.1 um units
 DEFAULT_AXES = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
 _DEFAULT_CHANNEL = {"udp_multicast": "239.74.163.2", "virtual": "channel0"}
 RECV_BUFFER_BYTES = 8 << 20  # requested udp_multicast socket buffer (the kernel caps it at rmem_max)
@@ -113,7 +117,9 @@ class CanDriver(Driver):
         self._sync_stop = threading.Event()
         self._sync_thread: threading.Thread | None = None
         self._opened_at = 0.0  # host monotonic time the driver finished opening, s
-        self._last_rx: float | None = None  # host monotonic time of the last frame, s
+        self._last_rx = 0.0  # host monotonic time of the last frame the capture reads, s
+        self._stop_error: CounterError | None = None  # the counter cannot be followed: raised next read
+        self._bootup: dict[int, int] = {}  # NMT boot-up COB-ID -> node id of the nodes read
         self._last_ts: float | None = None  # receive timestamp of the last frame, s
         self._silence_s = 0.25  # s of silence (receive timestamps) counted as a reconnect
 
@@ -179,11 +185,52 @@ class CanDriver(Driver):
             info = self._open_dbc() if self.url.option("dbc", str) else self._open_canopen()
             if self.url.option("sync", bool, False):
                 self._start_sync(info.sample_period)
+            self._opened_at = time.monotonic()
+            self._await_first_frame()
+            self._last_rx = time.monotonic()
         except BaseException:
-            self._shutdown_bus()
+            self._close()
             raise
-        self._opened_at = time.monotonic()
         return info
+
+    def _relevant(self, msg: can.Message) -> bool:
+        """Whether a frame carries ticks (the SYNC or counter frame, a position PDO or DBC frame): the
+        frames whose absence is a silent bus (a status node alone makes no samples)."""
+        cob = msg.arbitration_id
+        return cob == self._sync_cob or self._dispatch.get(cob, ("status",))[0] != "status"
+
+    def _await_first_frame(self) -> None:
+        """Wait up to ``timeout`` for the first frame the capture reads, so that a silent bus is a
+        one-line error before any log is written (docs/capture.md); frames read go to the backlog."""
+        if any(self._relevant(m) for m in self._backlog):
+            return
+        others: set[int] = set()
+        deadline = self._opened_at + self.timeout_s
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                msg = self._bus.recv(min(left, 0.1))
+            except can.CanOperationError:
+                self.stats.corrupt += 1  # a datagram that is not a CAN frame
+                continue
+            if msg is None:
+                continue
+            self._backlog.append(msg)
+            if self._relevant(msg):
+                return
+            others.add(msg.arbitration_id)
+        where = f"{self.interface} {self.channel}"
+        if others:
+            ids = ", ".join(f"0x{i:X}" for i in sorted(others)[:8]) + (", ..." if len(others) > 8 else "")
+            raise TransportTimeout(
+                f"CAN frames arrive on {where} but in {self.timeout_s:g} s none the capture reads (ids seen: {ids}; "
+                f"expected {self._expected_ids()}): check {'the DBC' if self._mode == 'dbc' else 'nodes= and 0x1005'}")
+        raise TransportTimeout(
+            f"no CAN frame in {self.timeout_s:g} s on {where}: nothing is sending on this bus (check the "
+            "interface, channel and port, and that the drives run)")
+
+    def _expected_ids(self) -> str:
+        ids = sorted({self._sync_cob, *(cob for cob, entry in self._dispatch.items() if entry[0] != "status")})
+        return ", ".join(f"0x{i:X}" for i in ids)
 
     def _open_canopen(self) -> StreamInfo:
         import canopen
@@ -239,9 +286,15 @@ class CanDriver(Driver):
             self._dispatch[status.cob_id] = ("status", status.compiled(), status.length,
                                              status.position(com.PROGRAM_STATUS, 1),
                                              status.position(com.PROGRAM_STATUS, 2))
-        modulus = sync.overflow if sync.overflow > 1 else 1 << 32
-        self._asm = TickAssembler(len(keep), len(keep), CounterUnwrapper(modulus, 1 if sync.overflow > 1 else 0, period),
-                                  period)
+        # CiA 301: without 0x1019 (or with it 0) the SYNC carries no counter; ticks are then
+        # numbered by arrival order and host receive time (modulus 1).  A counter byte sent
+        # anyway cannot be unwrapped without its overflow value, so it is ignored.
+        counted = sync.overflow > 1
+        unwrap = CounterUnwrapper(sync.overflow if counted else 1, 1, period,
+                                  f"SYNC counter (1..{sync.overflow})" if counted else "SYNC without counter")
+        self._asm = TickAssembler(len(keep), len(keep), unwrap, period)
+        # a drive or the status node that restarts says so with its NMT boot-up message
+        self._bootup = {0x700 + nid: nid for nid in [nodes[i] for i in keep] + ([status_id] if status_id else [])}
         self._mode = "canopen"
         axes = tuple(names[i] for i in keep)
         return StreamInfo(
@@ -251,7 +304,7 @@ class CanDriver(Driver):
             units=("mm",) * len(axes),
             extra={"transport": "can", "protocol": "canopen", "interface": self.interface, "channel": self.channel,
                    "nodes": [nodes[i] for i in keep], "status_node": status_id or None,
-                   "increments_per_mm": [scales[i] for i in keep], "sync_counter_overflow": sync.overflow,
+                   "position_units_per_mm": [scales[i] for i in keep], "sync_counter_overflow": sync.overflow,
                    "sync_producer": "capture" if url.option("sync", bool, False) else "controller",
                    "mapping_from": "sdo" if use_sdo else "eds"},
         )
@@ -280,7 +333,9 @@ class CanDriver(Driver):
             self._dispatch[p.frame_id] = ("dbc", k, p.message, p.length, tuple(ax))
         self._sync_cob = layout.tick_id
         self._overflow = layout.modulus
-        self._asm = TickAssembler(len(keep), len(parts), CounterUnwrapper(layout.modulus, 0, period), period)
+        unwrap = CounterUnwrapper(layout.modulus, 0, period, f"DBC counter ({layout.modulus.bit_length() - 1} bits)")
+        self._asm = TickAssembler(len(keep), len(parts), unwrap, period)
+        self._bootup = {}
         self._mode = "dbc"
         axes = tuple(names[i] for i in keep)
         return StreamInfo(
@@ -321,8 +376,31 @@ class CanDriver(Driver):
 
     # -- reading --------------------------------------------------------------------------
     def _read(self, timeout: float) -> list[Sample]:
-        bus, asm, dispatch = self._bus, self._asm, self._dispatch
+        if self._stop_error is not None:
+            raise self._stop_error  # the samples read before it were returned by the last call
         out: list[Sample] = []
+        try:
+            self._drain(timeout, out)
+        except CounterError as exc:
+            self._stop_error = exc  # raised on the next call, after these samples are recorded
+        asm = self._asm
+        if self.ended:
+            out += asm.release()  # the end of the program: no later frame can contradict them
+        self.stats.received += len(out)
+        self.stats.skipped = asm.skipped_ticks  # ticks that arrived but could not become samples
+        # stats.dropped stays 0: every lost tick shows as a counter gap, which the capture
+        # loop counts (drivers/capture.py); asm.lost_ticks holds the same number here.
+        if not out and not self.ended and self._stop_error is None:
+            now = time.monotonic()
+            if now - self._last_rx > self.timeout_s:
+                raise TransportTimeout(
+                    f"no CAN frame for {now - self._last_rx:.1f} s on {self.interface} {self.channel}: the "
+                    "controller stopped sending (bus disconnected or controller off)")
+        return out
+
+    def _drain(self, timeout: float, out: list[Sample]) -> None:
+        """Handle the frames waiting (up to _DRAIN_MAX), appending completed samples to ``out``."""
+        bus, asm, dispatch = self._bus, self._asm, self._dispatch
         wait = timeout
         for _ in range(_DRAIN_MAX):
             try:
@@ -331,27 +409,35 @@ class CanDriver(Driver):
                 self.stats.corrupt += 1  # a datagram that is not a CAN frame
                 continue
             if msg is None:
-                break
+                return
             wait = 0.0
-            self._last_rx = time.monotonic()
+            if msg.is_error_frame or msg.is_remote_frame:
+                continue
+            cob = msg.arbitration_id
+            if cob in self._bootup and msg.dlc == 1 and msg.data[0] == 0 and asm.counter is not None:
+                raise ControllerRestart(
+                    f"node {self._bootup[cob]} sent its NMT boot-up message (0x{cob:X}): it restarted "
+                    f"(after counter {asm.counter}); the log ends there")
+            if cob != self._sync_cob and cob not in dispatch:
+                continue
+            if self._relevant(msg):
+                self._last_rx = time.monotonic()
             # Silence measured on the receive timestamps (kernel time for udp_multicast), so a
             # capture loop that was busy for a while does not look like a silent bus.
             ts = msg.timestamp
             if self._last_ts is not None and ts - self._last_ts > self._silence_s and asm.counter is not None:
                 self.stats.reconnects += 1  # the bus was silent, then frames resumed
             self._last_ts = ts
-            entry = dispatch.get(msg.arbitration_id)
-            if msg.arbitration_id == self._sync_cob and self._mode == "canopen":
-                data = msg.data
-                if msg.dlc == 1:
-                    asm.open_tick(data[0], msg.timestamp)
-                elif msg.dlc == 0 and self._overflow <= 1:
-                    asm.open_tick((asm.counter or 0) + 1 if asm.counter is not None else 0, msg.timestamp)
+            if cob == self._sync_cob and self._mode == "canopen":
+                n = len(msg.data)
+                if self._overflow > 1 and n == 1 and 1 <= msg.data[0] <= self._overflow:
+                    out += asm.open_tick(msg.data[0], ts)
+                elif self._overflow <= 1 and n <= 1:
+                    out += asm.open_tick(0, ts)  # no counter (a byte sent anyway is ignored)
                 else:
-                    self.stats.corrupt += 1
+                    self.stats.corrupt += 1  # wrong length, or a counter outside 1..0x1019
                 continue
-            if entry is None or msg.is_error_frame or msg.is_remote_frame:
-                continue
+            entry = dispatch[cob]
             kind = entry[0]
             if kind == "pdo":
                 _, part, st, length, axis, i_cmd, i_act, scale = entry
@@ -383,8 +469,8 @@ class CanDriver(Driver):
                 sig = message.decode(bytes(msg.data), decode_choices=False)
                 if sig.get("state") == com.STATE_ENDED:
                     self.ended = True
-                    break
-                asm.open_tick(int(sig["counter"]), msg.timestamp)
+                    return
+                out += asm.open_tick(int(sig["counter"]), ts)
                 asm.segment = int(sig.get("segment", 0))
             elif kind == "status":
                 _, st, length, i_seg, i_state = entry
@@ -395,23 +481,7 @@ class CanDriver(Driver):
                 asm.segment = int(vals[i_seg])
                 if vals[i_state] == com.STATE_ENDED:
                     self.ended = True
-                    break
-        self.stats.received += len(out)
-        self.stats.skipped = asm.incomplete_ticks  # ticks whose PDOs did not all arrive
-        # stats.dropped stays 0: every lost tick shows as a counter gap, which the capture
-        # loop counts (drivers/capture.py); asm.lost_ticks holds the same number here.
-        if not out and not self.ended:
-            now = time.monotonic()
-            if self._last_rx is not None and now - self._last_rx > self.timeout_s:
-                raise TransportTimeout(
-                    f"no CAN frame for {now - self._last_rx:.1f} s on {self.interface} {self.channel}: the "
-                    "controller stopped sending (bus disconnected or controller off)")
-            if self._last_rx is None and now - self._opened_at > self.timeout_s:
-                raise TransportTimeout(
-                    f"no CAN frame in {now - self._opened_at:.1f} s on {self.interface} {self.channel}: nothing "
-                    "is sending on this bus (check the interface, channel and port, and that the drives run)")
-        return out
-
+                    return
     # -- closing --------------------------------------------------------------------------
     def _shutdown_bus(self) -> None:
         if self._bus is not None:
@@ -421,11 +491,18 @@ class CanDriver(Driver):
                 self._bus = None
 
     def unusable_reason(self) -> str:
+        asm = self._asm
+        if asm is None or not asm.skipped_ticks:
+            return ""
+        if asm.orphan_ticks > asm.incomplete_ticks:
+            opener = "counter frame" if self._mode == "dbc" else f"SYNC (COB-ID 0x{self._sync_cob:X}, from 0x1005)"
+            return (f"position frames that no {opener} came before; check that the controller sends it "
+                    f"{'(the DBC frame with the counter signal)' if self._mode == 'dbc' else 'and 0x1005'}")
         return ("ticks that did not bring a position frame from every axis; check nodes= (or the DBC) "
                 "against the ids the drives send with")
 
     def position_hint(self, axis: str) -> str:
-        return f"the scale= of axis {axis} (increments per mm) or its DBC factor"
+        return f"the scale= of axis {axis} (position units per mm) or its DBC factor"
 
     def _close(self) -> None:
         self._sync_stop.set()

@@ -1,95 +1,233 @@
 """Assemble controller sample ticks from CAN frames: one tick-opening frame, then the parts.
 
-On a CANopen bus a tick is one SYNC (carrying the CiA 301 SYNC counter 1..240) followed
-by the SYNC-triggered TPDOs of every axis node; with a DBC file it is the frame holding
-the ``counter`` signal followed by the position frames.  This module knows nothing of
-either: it is told "a tick opened with raw counter c at host time ts" and "part p of
-the current tick arrived with these axis values", and it emits a :class:`Sample` as soon
-as every part of a tick is in.
+On a CANopen bus a tick is one SYNC (carrying the CiA 301 SYNC counter 1..0x1019, or no
+counter at all when the drive has no 0x1019) followed by the SYNC-triggered TPDOs of every
+axis node; with a DBC file it is the frame holding the ``counter`` signal followed by the
+position frames.  This module knows nothing of either: it is told "a tick opened with raw
+counter c at host time ts" and "part p of the current tick arrived with these axis
+values", and it emits a :class:`Sample` as soon as every part of a tick is in.
 
-Rules (docs/can.md):
+Numbering ticks (docs/can.md, "Numbering ticks across silences"): a wrapping counter says
+how many ticks passed only modulo its number of values M (a counterless SYNC says nothing:
+M = 1).  The host receive times say the rest.  :class:`CounterUnwrapper` keeps the
+*envelope*, the host time at which each tick arrives when nothing delays it (the earliest
+line through the receive times), the *jitter* (how far frames have been off it) and the
+*slack* (how early frames have come: how far off the envelope itself was).  The advance of
+a new frame is the largest one the counter allows that does not make the frame early;
+when fewer wraps are also plausible (the frame would then be late by a whole wrap, and
+frames have been that late), or the frame is later than any jitter seen, it says so
+(:class:`CounterError`) instead of guessing.  A counter that advances further than the
+host time allows (it jumped back: the controller restarted) is a
+:class:`ControllerRestart`.  One frame repeated (same counter, no time passed) is ignored.  Ticks numbered
+across a silence of more than a wrap are held back until later frames have confirmed
+the host clock, so a wrongly numbered tick is never emitted.
 
-* the raw counter wraps (SYNC: 1..240, a 16-bit DBC counter: 0..65535); it is unwrapped
-  to a monotonic controller counter that starts at the first raw value seen (minus the
-  lowest raw value: 0..modulus-1).  A gap longer than one wrap (the bus went silent) is
-  resolved with the host receive times: after more than ``wrap_min_s`` (0.1 s) of
-  silence the number of whole wraps is the one that best matches the elapsed host time
-  divided by the observed host time per tick.
+Other rules:
+
 * a tick whose parts are not all in when the next tick opens is not emitted (a lost or
   rejected frame); the capture loop sees the gap in the counter.
-* a part arriving twice within one tick means its tick-opening frame was lost; the
-  frames cannot be stamped, so they are ignored (their tick is already counted lost).
+* a part arriving twice within one tick, or before any tick, means its tick-opening frame
+  was lost; the frames cannot be stamped, so they are ignored (counted per tick in
+  ``orphan_ticks``).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
+from core.errors import StreamError
 from drivers.base import Sample
 
-__all__ = ["TickAssembler", "CounterUnwrapper"]
+__all__ = ["TickAssembler", "CounterUnwrapper", "CounterError", "ControllerRestart"]
+
+
+class CounterError(StreamError):
+    """The tick counter cannot be followed past this frame (a restart, or a silence the host clock cannot span)."""
+
+
+class ControllerRestart(CounterError):
+    """The controller restarted: its counter jumped back, or a node sent its NMT boot-up message."""
+
+
+#: a frame is numbered with the largest advance that makes it at most this early (ticks)
+EARLY_TICKS = 0.5
+#: how early (ticks) the first frame after a silence may be before the host clock is in doubt
+EARLY_AT_SILENCE = 0.25
+#: distance from the envelope (ticks) always allowed, also before any jitter was seen
+MIN_ALLOWED_LATENESS = 0.5
+#: the jitter a frame's lateness is compared with decays with this time constant (s)
+JITTER_MEMORY_S = 2.0
+#: how fast the envelope may drift later (s per s), for host and controller clock rates
+ENVELOPE_LEAK = 1e-4
+#: ticks before the stream's own rate is known; until then the controller's period is assumed,
+#: a doubt is reported only when the stream so far runs near it, and frames may be as early
+#: as they have been late (the envelope may still be drawn through late first frames)
+ESTABLISH_TICKS = 100
+#: a stream whose measured period is further than this from the controller's does not run at
+#: its controller's clock (a replay); a live controller is within parts per million
+RATE_TOLERANCE = 0.02
 
 
 @dataclass
 class CounterUnwrapper:
-    """Unwrap a counter that runs ``first .. first+modulus-1`` and then wraps.
+    """Turn (raw counter, host receive time) pairs into a monotonic controller tick counter.
 
     Parameters
     ----------
-    modulus : number of distinct counter values (240 for the SYNC counter, 2**16 for a
-        16-bit counter signal).
+    modulus : number of distinct counter values: 240 for the default SYNC counter, 2**bits
+        for a DBC counter signal, 1 for a SYNC without counter (ticks from arrival order and
+        host time alone).
     first : the lowest raw value (1 for the SYNC counter, 0 for a DBC counter).
-    period_s : nominal controller sample period in s, the host time per tick assumed
-        until enough ticks have been seen to measure it.
+    period_s : the controller's sample period, s.
+    what : the counter's name in error messages.
     """
 
     modulus: int
     first: int = 0
     period_s: float = 0.001
-    #: host seconds of bus silence below which a gap is taken to span less than one wrap
-    #: (one wrap of the SYNC counter is 0.24 s at 1 kHz); keeps scheduling jitter of a
-    #: faster-than-real-time replay from being read as whole wraps
-    wrap_min_s: float = 0.1
-    _last_raw: int | None = None
-    _last_u: int = 0
-    _last_ts: float = 0.0
-    _anchor: tuple[float, int] | None = None
-    _ticks_seen: int = 0
+    what: str = "counter"
+    _last_raw: int = 0
+    _u: int | None = None  # unwrapped counter of the last tick
+    _ts: float = 0.0  # its host receive time
+    _env: float = 0.0  # envelope: host time tick _u arrives at when nothing delays it
+    _jitter: float = 0.0  # decaying maximum of the distance from the envelope, ticks
+    _slack: float = 0.0  # decaying maximum of how early frames came, ticks (how far off the envelope was)
+    _start: tuple[float, int] = (0.0, 0)  # (host time, counter) of the first tick
+    _confirm_until: float = -math.inf  # ticks opened before this host time are unconfirmed
+    _window_early: float = MIN_ALLOWED_LATENESS  # how early a frame may be until then, ticks
+    _confirmed_u: int = 0  # the last tick before that silence
 
     def host_period(self) -> float:
-        """Observed host seconds per controller tick (the nominal period until 100 ticks are in)."""
-        if self._anchor is not None and self._last_u - self._anchor[1] >= 100:
-            measured = (self._last_ts - self._anchor[0]) / (self._last_u - self._anchor[1])
-            if measured > 0:
+        """Host seconds per controller tick: the nominal period, or for a stream that does not run
+        at it (within 2 %, measured over the whole capture) the measured one."""
+        span = (self._u or 0) - self._start[1]
+        if span >= ESTABLISH_TICKS:
+            measured = (self._ts - self._start[0]) / span
+            if measured > 0 and abs(measured / self.period_s - 1) > RATE_TOLERANCE:
                 return measured
         return self.period_s
 
-    def __call__(self, raw: int, ts: float) -> int:
-        """The unwrapped counter of a raw counter received at host time ``ts`` (s).
+    def _replay(self, host_period: float) -> bool:
+        """Whether the stream is known not to run at its controller's period: a replay (``agent
+        serve --speed``, a trace played into an adapter), whose host times are not the
+        controller's clock.  Its counter is taken as it reads."""
+        return self.modulus > 1 and host_period != self.period_s
+
+    def _maybe_replay(self, ts: float) -> bool:
+        """Before the rate is established: too few ticks to tell, or arriving > 25 % off the period."""
+        span = (self._u or 0) - self._start[1]
+        if span >= ESTABLISH_TICKS:
+            return False
+        return span < 10 or abs((ts - self._start[0]) / span / self.period_s - 1) > 0.25
+
+    @property
+    def unconfirmed_until(self) -> float:
+        """Host time until which ticks numbered across a silence wait for later frames to confirm them."""
+        return self._confirm_until
+
+    def __call__(self, raw: int, ts: float) -> int | None:
+        """The unwrapped counter of a tick-opening frame received at host time ``ts`` (s);
+        None for a repeated frame (ignore it).  Raises :class:`CounterError`.
 
         The first call returns ``raw - first`` (0..modulus-1), so a capture that starts
         with the controller's counter at 0 numbers its samples like the controller.
         """
-        raw = int(raw) - self.first
-        if self._last_raw is None:
-            u = raw  # 0..modulus-1: a capture started with the controller counts like it
-            self._anchor = (ts, u)
+        r = int(raw) - self.first if self.modulus > 1 else 0
+        if self._u is None:
+            self._u, self._last_raw, self._ts, self._env = r, r, ts, ts
+            self._start = (ts, r)
+            return r
+        M = self.modulus
+        d0 = (r - self._last_raw) % M
+        Th = self.host_period()
+        if self._replay(Th):
+            a = d0
         else:
-            delta = (raw - self._last_raw) % self.modulus
-            if delta == 0:
-                delta = self.modulus  # the same value again is at least one whole wrap later
-            dt = ts - self._last_ts
-            wraps = 0
-            # a stream arriving faster than half the controller's clock is a replay: a pause
-            # there is its sender's (a garbage collection), not ticks lost on the bus, and
-            # at a host period of microseconds it would read as whole wraps that never were
-            if dt > self.wrap_min_s and self.host_period() >= 0.5 * self.period_s:
-                est = dt / self.host_period()
-                wraps = max(0, int(round((est - delta) / self.modulus)))
-            u = self._last_u + delta + wraps * self.modulus
-        self._last_raw, self._last_u, self._last_ts = raw, u, ts
-        self._ticks_seen += 1
-        return u
+            try:
+                a = self._advance(d0, ts, Th)
+            except CounterError:
+                if self.modulus == 1 or not self._maybe_replay(ts):
+                    raise
+                a = d0  # a replay cannot be told from a restart before its rate is known
+        if a == 0:
+            return None  # the same value again right away: a repeated frame
+        dt = ts - self._ts
+        predicted = self._env + a * Th + ENVELOPE_LEAK * min(dt, 10 * Th)
+        env = min(predicted, ts)
+        # a frame later than the envelope shows jitter; so does one earlier than it: the
+        # frames the envelope was drawn through were late by that much.  Frames of a live
+        # controller are never early, so earliness says only how far off the envelope was
+        # (it was drawn through late first frames, say) and is kept apart.
+        off = (ts - predicted) / Th
+        decay = math.exp(-max(dt, 0.0) / JITTER_MEMORY_S)
+        self._jitter = max(abs(off), self._jitter * decay)
+        self._slack = max(-off, self._slack * decay)
+        self._u += a
+        self._last_raw, self._ts, self._env = r, ts, env
+        return self._u
+
+    def _advance(self, d0: int, ts: float, Th: float) -> int:
+        """Ticks from the last frame to this one: d0 + n x modulus, n from the host time; 0 = a repeat."""
+        M = self.modulus
+        h = (ts - self._env) / Th  # ticks since the last tick, if this frame is not delayed
+        base = d0 if d0 or M > 1 else 1  # the fewest ticks the counter allows (0: a repeat)
+        allowed = max(2 * self._jitter, MIN_ALLOWED_LATENESS)  # how late a frame may be
+        # How early: by as much as the envelope has been off.  In the first ticks it may still be
+        # drawn through frames that were all late: by as much as frames have been late.  While
+        # ticks numbered across a silence are not yet confirmed, as it was then (frames that come
+        # early under that numbering would otherwise widen it themselves).
+        window = ts < self._confirm_until
+        if window:
+            early = self._window_early
+        else:
+            young = (self._u or 0) - self._start[1] < ESTABLISH_TICKS
+            early = max(2 * self._slack, 2 * self._jitter if young else 0.0, MIN_ALLOWED_LATENESS)
+        # the next counter value is never "ahead": frames a sender held back arrive in a burst,
+        # and a restart that lands on the next value mislabels nothing (unless a silence was
+        # just bridged: then the burst is what shows it was a stall)
+        if base > h + early and (base != 1 or window or M == 1):
+            # without a counter, or right after a bridged silence, it is the receive times that jitter
+            kind = CounterError if window or M == 1 else ControllerRestart
+            raise kind(self._ahead_message(d0, ts, h))
+        n = max(0, int((h + EARLY_TICKS - base) // M))
+        a = base + n * M
+        if n >= 1:
+            late = h - a  # how late the frame is behind the envelope if a ticks passed
+            # resolved only if this frame is on the envelope as closely as frames have been, and
+            # the next fewer wraps would make it later than any frame has been
+            if late > allowed or late < -max(EARLY_AT_SILENCE, self._slack) or late + M <= allowed:
+                raise CounterError(self._ambiguous_message(a, late, allowed, ts, Th))
+            # a stall of the sender longer than a wrap would look the same until the frames it
+            # held back arrive in a burst: keep this tick back until they would have
+            self._confirm_until, self._window_early = ts + (allowed + 2) * Th, early
+            self._confirmed_u = self._u
+        return a
+
+    def _ahead_message(self, d0: int, ts: float, h: float) -> str:
+        gap_ms = (ts - self._ts) * 1e3
+        if ts < self._confirm_until:
+            return (f"frames arrive faster than the sample period right after {self._u - self._confirmed_u} "
+                    f"ticks were counted across a silence ({self.what}): the sender had held them back, which "
+                    f"the host clock cannot tell from a silence (after counter {self._confirmed_u}); the log "
+                    f"ends there")
+        if self.modulus == 1:
+            return (f"a {self.what} arrived {gap_ms:.2f} ms after the previous one, before the next was due "
+                    f"({self.period_s * 1e3:g} ms period): the host receive times jitter too much to number "
+                    f"ticks by arrival (after counter {self._u}); the log ends there")
+        return (f"the {self.what} jumped by {d0} ({self._last_raw + self.first} -> "
+                f"{(self._last_raw + d0) % self.modulus + self.first}) in {gap_ms:.1f} ms, where at most "
+                f"{max(h, 0):.1f} sample periods passed: the controller restarted or its counter was reset, or "
+                f"its frames arrive more unevenly than so far (after counter {self._u}); the log ends there")
+
+    def _ambiguous_message(self, a: int, late: float, allowed: float, ts: float, Th: float) -> str:
+        gap_ms = (ts - self._ts) * 1e3
+        wraps = f"the {self.what} wraps every {self.modulus * Th * 1e3:g} ms" if self.modulus > 1 else \
+            f"a {self.what} says nothing of it"
+        return (f"the host clock cannot tell how many ticks passed ({a} or {a - self.modulus}) in the "
+                f"{gap_ms:.1f} ms since the last tick: {wraps}, frames arrive up to "
+                f"{self._jitter * Th * 1e3:.2f} ms late and this one would be {late * Th * 1e3:+.2f} ms off "
+                f"(after counter {self._u}); the log ends there")
 
 
 @dataclass
@@ -112,9 +250,15 @@ class TickAssembler:
     lost_ticks: int = 0  # ticks known lost: counter gaps + incomplete ticks
     incomplete_ticks: int = 0
     orphan_parts: int = 0  # parts that arrived without their tick-opening frame
+    orphan_ticks: int = 0  # ticks' worth of orphan parts: counted once per tick-opening window
+    repeated_openings: int = 0  # tick-opening frames repeated (ignored)
     _counter: int | None = None
     _mask: int = 0
     _emitted: bool = True
+    _orphan_counted: bool = False
+    _orphan_mask: int = 0
+    _hold: bool = False  # the current tick waits for the host clock to be confirmed
+    _held: list[Sample] = field(default_factory=list)
     _cmd: list[float] = field(default_factory=list)
     _act: list[float] = field(default_factory=list)
 
@@ -123,27 +267,46 @@ class TickAssembler:
         self._act = [0.0] * self.n_axes
         self._full = (1 << self.n_parts) - 1
 
-    def open_tick(self, raw_counter: int, ts: float) -> int:
-        """A tick-opening frame arrived (raw counter, host time in s); returns the unwrapped counter."""
+    def open_tick(self, raw_counter: int, ts: float) -> list[Sample]:
+        """A tick-opening frame arrived (raw counter, host time in s).
+
+        Returns the samples held back until now that this frame confirms (usually none).
+        Raises :class:`CounterError`; the held samples are then dropped.
+        """
+        try:
+            u = self.unwrap(raw_counter, ts)
+        except CounterError:
+            self._held.clear()
+            raise
+        if u is None:
+            self.repeated_openings += 1
+            return []
         if self._counter is not None and not self._emitted:
             self.incomplete_ticks += 1
             self.lost_ticks += 1
-        u = self.unwrap(raw_counter, ts)
         if self._counter is not None and u > self._counter + 1:
             self.lost_ticks += u - self._counter - 1
         self._counter = u
         self._mask = 0
         self._emitted = False
-        return u
+        self._orphan_counted, self._orphan_mask = False, 0
+        self._hold = ts < self.unwrap.unconfirmed_until
+        if self._held and not self._hold:
+            return self.release()
+        return []
 
     def part(self, index: int, values: list[tuple[int, float, float]]) -> Sample | None:
         """Part ``index`` of the current tick arrived with (axis index, commanded mm, actual mm) values.
 
-        Returns the sample when this part completes the tick, else None.
+        Returns the sample when this part completes the tick (and it is not held back), else None.
         """
         bit = 1 << index
         if self._counter is None or self._emitted or self._mask & bit:
             self.orphan_parts += 1
+            if not self._orphan_counted or self._orphan_mask & bit:  # a part again: another tick's
+                self.orphan_ticks += 1
+                self._orphan_counted, self._orphan_mask = True, 0
+            self._orphan_mask |= bit
             return None
         self._mask |= bit
         for axis, cmd, act in values:
@@ -152,10 +315,24 @@ class TickAssembler:
         if self._mask != self._full:
             return None
         self._emitted = True
-        return Sample(self._counter, self._counter * self.period_s, tuple(self._cmd), tuple(self._act),
-                      self.segment)
+        sample = Sample(self._counter, self._counter * self.period_s, tuple(self._cmd), tuple(self._act),
+                        self.segment)
+        if self._hold:
+            self._held.append(sample)
+            return None
+        return sample
+
+    def release(self) -> list[Sample]:
+        """The held-back samples, now confirmed (also at the end of the program: nothing can contradict them)."""
+        out, self._held = self._held, []
+        return out
 
     @property
     def counter(self) -> int | None:
         """Unwrapped counter of the tick being assembled (None before the first)."""
         return self._counter
+
+    @property
+    def skipped_ticks(self) -> int:
+        """Ticks that arrived but could not become samples: incomplete, or parts without their opening frame."""
+        return self.incomplete_ticks + self.orphan_ticks

@@ -8,11 +8,13 @@ frame at 1 kHz x n axes is one ``struct.unpack``.
 
 Objects used:
 
-* 0x6062:00 position demand value, 0x6064:00 position actual value (INTEGER32,
-  increments; mm = increments / scale, scale in increments per mm) - both in one
-  synchronous TPDO per axis node;
+* 0x6062:00 position demand value, 0x6064:00 position actual value (INTEGER32, in the
+  drive's position units: CiA 402 user-defined units, set by its factor group; the
+  increment values are 0x60FC and 0x6063, not read) - both in one synchronous TPDO per
+  axis node; mm = value / scale, scale in position units per mm;
 * 0x1005 COB-ID SYNC, 0x1006 communication cycle period (us) = the sample period,
-  0x1019 synchronous counter overflow value (the SYNC counter runs 1..overflow);
+  0x1019 synchronous counter overflow value (the SYNC counter runs 1..overflow; optional:
+  without it, or 0/1, the SYNC carries no counter);
 * 0x2100:01 segment, 0x2100:02 program state (0 idle, 1 running, 2 ended) of the
   controller's program-status node (fixtures/can/cnc_status.eds), event-driven TPDO.
 """
