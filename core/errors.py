@@ -99,5 +99,10 @@ class StreamError(TransportError):
     changes mid-capture.  A capture that ends with it ends ``"unusable data"``."""
 
 
+class ControllerRestartError(StreamError):
+    """The controller restarted mid-capture (its counter went back, or it announced a boot).
+    A capture that ends with it ends ``"controller restarted"``, keeping the samples before."""
+
+
 class RapidIdentWarning(UserWarning):
     """Something is suspicious but usable (resampled timing, missing capture summary, ...)."""

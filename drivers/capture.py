@@ -65,7 +65,8 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Iterator
 
-from core.errors import InputError, RapidIdentError, RapidIdentWarning, StreamError, TransportError
+from core.errors import (ControllerRestartError, InputError, RapidIdentError, RapidIdentWarning, StreamError,
+                         TransportError)
 from core.log_format import FAILED_ENDS
 from drivers.base import Driver, Sample, StreamInfo
 from core.writer import McapRecorder
@@ -311,7 +312,8 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
             try:
                 batch = driver.read(read_timeout)
             except TransportError as exc:
-                summary.end = "unusable data" if isinstance(exc, StreamError) else "transport error"
+                summary.end = ("controller restarted" if isinstance(exc, ControllerRestartError)
+                               else "unusable data" if isinstance(exc, StreamError) else "transport error")
                 summary.error = str(exc)
                 break
             now_ns = time.time_ns()

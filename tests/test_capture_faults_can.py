@@ -540,7 +540,7 @@ def test_agent_capture_of_a_restarting_controller_exits_1_with_one_line(tmp_path
     assert "(after counter 699)" in line
     log = load_recording(tmp_path / "log.mcap")
     k = assert_every_sample_exact(log, ticks.period)
-    assert k[-1] == 699 and log.metadata["summary"]["end"] == "unusable data"
+    assert k[-1] == 699 and log.metadata["summary"]["end"] == "controller restarted"
 
 
 @pytest.mark.slow

@@ -504,6 +504,10 @@ class CanDriver(Driver):
     def position_hint(self, axis: str) -> str:
         return f"the scale= of axis {axis} (position units per mm) or its DBC factor"
 
+    def clock_hint(self) -> str:
+        """Where the sample period is set, for the capture's clock check."""
+        return "the period= option, else the drive's communication cycle period 0x1006 (or the DBC's cycle time)"
+
     def _close(self) -> None:
         self._sync_stop.set()
         if self._sync_thread is not None:

@@ -36,7 +36,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from core.errors import StreamError
+from core.errors import ControllerRestartError, StreamError
 from drivers.base import Sample
 
 __all__ = ["TickAssembler", "CounterUnwrapper", "CounterError", "ControllerRestart"]
@@ -46,7 +46,7 @@ class CounterError(StreamError):
     """The tick counter cannot be followed past this frame (a restart, or a silence the host clock cannot span)."""
 
 
-class ControllerRestart(CounterError):
+class ControllerRestart(CounterError, ControllerRestartError):
     """The controller restarted: its counter jumped back, or a node sent its NMT boot-up message."""
 
 
