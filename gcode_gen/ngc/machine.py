@@ -1,0 +1,522 @@
+"""The modal state of an RS274/NGC controller and the moves one block makes.
+
+:class:`Machine` executes one lexed block (its words already evaluated) in LinuxCNC's order
+of execution (feed mode, F, S, T, M6, spindle/coolant, dwell, plane, units, cutter
+compensation, tool length offset, coordinate system, path mode, distance modes, retract
+mode, G10/G28/G30/G92, motion, stops) and appends :class:`~gcode_gen.program.Block` moves.
+
+Coordinates: the machine starts at the origin of machine coordinates, G54 active, no
+offsets, mm, XY plane, G90, G91.1, G94, G64 (LinuxCNC's and rs274's start state).  A
+programmed value v of a linear axis in the active system is the machine position
+``v·unit + G5x offset + G92 offset + tool length offset`` (mm); the blocks carry machine
+positions.  Rotary axes are in degrees and never scaled.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+from gcode_gen.ngc.canned_cycles import SUPPORTED_CYCLES, CycleState, expand_cycle
+from gcode_gen.ngc.parameters import COORD_SYSTEM, G5X_BASE, G28_BASE, G30_BASE, G92_BASE, Parameters
+from gcode_gen.ngc.tool_table import Tool
+from gcode_gen.program import Block
+
+__all__ = ["Machine", "AXES", "PLANES", "InterpError", "center_from_radius"]
+
+AXES = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
+ROTARY = ("A", "B", "C")
+INCH = 25.4
+#: plane -> (first axis, second axis, normal axis, first offset letter, second offset letter)
+PLANES = {"XY": ("X", "Y", "Z", "i", "j"), "XZ": ("Z", "X", "Y", "k", "i"), "YZ": ("Y", "Z", "X", "j", "k")}
+_COORD_SYSTEMS = {54.0: 1, 55.0: 2, 56.0: 3, 57.0: 4, 58.0: 5, 59.0: 6, 59.1: 7, 59.2: 8, 59.3: 9}
+_MOTION = {0.0: "G0", 1.0: "G1", 2.0: "G2", 3.0: "G3", 73.0: "G73", 80.0: "G80", 81.0: "G81", 82.0: "G82",
+           83.0: "G83", 84.0: "G84", 85.0: "G85", 86.0: "G86", 87.0: "G87", 88.0: "G88", 89.0: "G89"}
+#: G-codes that only set a mode this interpreter does not need (or that is its only mode).
+_NO_EFFECT_G = {40.0, 94.0, 97.0, 96.0, 17.1, 18.1, 19.1}
+#: M-codes without motion: stops, spindle, coolant, overrides, digital/analog I/O.
+_NO_MOTION_M = {0, 1, 3, 4, 5, 7, 8, 9, 48, 49, 50, 51, 52, 53, 60, 62, 63, 64, 65}
+_REFUSED_G = {
+    5.0: "cubic spline G5", 5.1: "quadratic B-spline G5.1", 5.2: "NURBS G5.2", 5.3: "NURBS G5.3",
+    7.0: "lathe diameter mode G7", 8.0: "lathe radius mode G8", 33.0: "spindle-synchronised motion G33",
+    33.1: "rigid tapping G33.1", 38.2: "probing G38.2", 38.3: "probing G38.3", 38.4: "probing G38.4",
+    38.5: "probing G38.5", 41.1: "dynamic cutter compensation G41.1", 42.1: "dynamic cutter compensation G42.1",
+    43.2: "additional tool length offset G43.2", 70.0: "lathe finishing cycle G70", 71.0: "lathe roughing cycle G71",
+    72.0: "lathe roughing cycle G72", 74.0: "left-hand tapping G74", 76.0: "lathe threading cycle G76",
+    84.0: "tapping cycle G84", 87.0: "back-boring cycle G87", 88.0: "manual-retract boring cycle G88",
+    95.0: "feed per revolution G95", 52.0: "local offset G52",
+}
+
+
+class InterpError(Exception):
+    """A block cannot be executed; the flow adds file and line."""
+
+
+@dataclass
+class Modal:
+    """The modal state saved by M70 and restored by M71/M72/M73."""
+
+    unit: float = 1.0
+    plane: str = "XY"
+    absolute: bool = True
+    arc_absolute: bool = False
+    inverse_time: bool = False
+    feed: float | None = None
+    retract_initial: bool = True  # G98
+    coord: int = 1
+    blend: float | None = math.inf  # None: exact stop (G61/G61.1); inf: G64 without P; else G64 P (mm)
+    motion: str | None = None
+
+
+@dataclass
+class Machine:
+    """Controller state and the moves produced so far (see module docstring)."""
+
+    params: Parameters
+    tools: dict[int, Tool] | None = None
+    dialect: str = "linuxcnc"
+    blocks: list[Block] = field(default_factory=list)
+    pos: dict[str, float] = field(default_factory=lambda: {a: 0.0 for a in AXES})
+    modal: Modal = field(default_factory=Modal)
+    g5x: dict[int, dict[str, float]] = field(default_factory=lambda: {i: {a: 0.0 for a in AXES} for i in range(1, 10)})
+    g92: dict[str, float] = field(default_factory=lambda: {a: 0.0 for a in AXES})
+    tlo: dict[str, float] = field(default_factory=lambda: {a: 0.0 for a in AXES})
+    tool: int = 0
+    selected: int = 0
+    comp_radius: float = 0.0
+    cycle: CycleState = field(default_factory=CycleState)
+    saved_modal: Modal | None = None
+    line: int = 0
+    n: int | None = None
+
+    # ---- coordinates --------------------------------------------------------------------
+    def offset(self, axis: str) -> float:
+        """Machine position of program 0 on ``axis`` (mm): G5x + G92 + tool length offset."""
+        return self.g5x[self.modal.coord][axis] + self.g92[axis] + self.tlo[axis]
+
+    def scale(self, axis: str) -> float:
+        return 1.0 if axis in ROTARY else self.modal.unit
+
+    def program(self, axis: str) -> float:
+        """Current position of ``axis`` in program units of the active system."""
+        return (self.pos[axis] - self.offset(axis)) / self.scale(axis)
+
+    def machine(self, axis: str, value: float) -> float:
+        """Machine position (mm) of program-unit ``value`` on ``axis`` (absolute)."""
+        return value * self.scale(axis) + self.offset(axis)
+
+    def _mirror_offsets(self) -> None:
+        """Write the offsets to their LinuxCNC parameter numbers (mm)."""
+        for k, a in enumerate(AXES):
+            self.params.set(G92_BASE + k, self.g92[a])
+            for i in range(1, 10):
+                self.params.set(G5X_BASE + 20 * (i - 1) + k, self.g5x[i][a])
+        self.params.set(COORD_SYSTEM, float(self.modal.coord))
+
+    # ---- output -------------------------------------------------------------------------
+    def feed_mm_s(self, motion: str, length_mm: float) -> float | None:
+        if motion == "G0":
+            return None
+        f = self.modal.feed
+        if f is None:
+            raise InterpError(f"{motion} move without a programmed feed (F)")
+        if f <= 0:
+            raise InterpError(f"{motion} move with feed F{f:g} (the feed must be positive)")
+        if self.modal.inverse_time:
+            return max(length_mm * f / 60.0, 1e-9)
+        return f * self.modal.unit / 60.0
+
+    def emit(self, motion: str, target: dict[str, float], *, center: dict[str, float] | None = None,
+             plane: str = "XY", turns: int = 1, length_mm: float | None = None) -> None:
+        moved = {a: v for a, v in target.items() if a in target}
+        if length_mm is None:
+            length_mm = math.sqrt(sum((moved[a] - self.pos[a]) ** 2 for a in moved if a not in ROTARY))
+        self.blocks.append(Block(line=self.line, n=self.n, motion=motion, target=moved,
+                                 feed=self.feed_mm_s(motion, length_mm), center=center, plane=plane, turns=turns,
+                                 blend_tolerance=self.modal.blend))
+        self.pos.update(moved)
+
+    def dwell(self, seconds: float) -> None:
+        if seconds < 0:
+            raise InterpError(f"negative dwell {seconds:g} s")
+        self.blocks.append(Block(line=self.line, n=self.n, motion="G4", target={}, dwell_s=seconds))
+
+    # ---- one block ----------------------------------------------------------------------
+    def execute(self, words: list[tuple[str, float]], on_end: Callable[[], None]) -> None:
+        """Execute one block of evaluated words (letters lower case)."""
+        gs: list[float] = []
+        ms: list[int] = []
+        vals: dict[str, float] = {}
+        for letter, value in words:
+            if letter == "g":
+                gs.append(round(value, 1))
+            elif letter == "m":
+                if value != int(value):
+                    raise InterpError(f"M{value:g}: M-codes are whole numbers")
+                ms.append(int(value))
+            else:
+                if letter in vals:
+                    raise InterpError(f"word {letter.upper()} appears twice in one block")
+                vals[letter] = value
+        for g in gs:
+            if g in _REFUSED_G:
+                raise InterpError(f"{_REFUSED_G[g]} is not supported")
+        for m in ms:
+            if 100 <= m <= 199:
+                raise InterpError(f"user-defined M-code M{m} is not supported (it runs an external program)")
+            if m in (98, 99):
+                raise InterpError(f"Fanuc subprogram call M{m} is not supported (use O-word subroutines)")
+            if m not in _NO_MOTION_M and m not in (2, 30, 6, 61, 70, 71, 72, 73, 66, 67, 68, 19):
+                raise InterpError(f"unknown or unsupported M-code M{m}")
+
+        motions = [g for g in gs if g in _MOTION]
+        non_modal = [g for g in gs if g in (4.0, 10.0, 28.0, 28.1, 30.0, 30.1, 53.0, 92.0, 92.1, 92.2, 92.3)]
+        if len(motions) > 1:
+            raise InterpError("two motion G-codes in one block")
+        if len([g for g in non_modal if g != 53.0]) > 1:
+            raise InterpError("two non-modal G-codes (G4, G10, G28, G30, G92…) in one block")
+        known = set(_MOTION) | set(non_modal) | _NO_EFFECT_G | set(_COORD_SYSTEMS) | {
+            17.0, 18.0, 19.0, 20.0, 21.0, 41.0, 42.0, 43.0, 43.1, 49.0, 61.0, 61.1, 64.0, 90.0, 91.0, 90.1, 91.1,
+            93.0, 98.0, 99.0}
+        for g in gs:
+            if g not in known:
+                raise InterpError(f"unknown or unsupported G-code G{g:g}")
+        used: set[str] = {"n"}
+
+        # 2-3 feed mode and rate
+        if 93.0 in gs:
+            self.modal.inverse_time = True
+            self.modal.feed = None
+        if 94.0 in gs:
+            self.modal.inverse_time = False
+        if "f" in vals:
+            if vals["f"] < 0:
+                raise InterpError(f"feed F{vals['f']:g} must not be negative")
+            self.modal.feed = vals["f"]
+            used.add("f")
+        elif self.modal.inverse_time and motions and motions[0] in ("G1", "G2", "G3"):
+            raise InterpError("inverse time feed (G93) needs F in every feed block")
+        used.add("s")
+        # 5-6 tool select and change (no motion); M61 sets the tool number
+        if "t" in vals:
+            self.selected = int(vals["t"])
+            self._check_tool(self.selected, "T")
+            used.add("t")
+        if 6 in ms:
+            self.tool = self.selected
+        if 61 in ms:
+            if "q" not in vals:
+                raise InterpError("M61 without a tool number Q")
+            self.tool = int(vals["q"])
+            self._check_tool(self.tool, "M61 Q")
+            used.add("q")
+        if 70 in ms:
+            self.saved_modal = self.snapshot()
+        if 71 in ms or 72 in ms:
+            if self.saved_modal is None:
+                raise InterpError(f"M{71 if 71 in ms else 72}: no modal state saved by M70")
+            self.restore(self.saved_modal)
+            if 71 in ms:
+                self.saved_modal = None
+        if 73 in ms:
+            self.on_m73()
+        if 66 in ms or 67 in ms or 68 in ms:
+            used |= {"p", "e", "l", "q"}
+        if 19 in ms:
+            used |= {"r", "q", "p"}
+        # 10 dwell
+        if 4.0 in gs:
+            if self.dialect == "iso" and "x" in vals:
+                seconds = vals.pop("x")  # ISO dwell time, not an axis
+            elif "p" in vals:
+                seconds = vals["p"] / (1000.0 if self.dialect == "iso" else 1.0)
+                used.add("p")
+            else:
+                raise InterpError("G4 dwell without a time (P)")
+            self.dwell(seconds)
+        # 11-12 plane and units
+        for g, plane in ((17.0, "XY"), (18.0, "XZ"), (19.0, "YZ")):
+            if g in gs:
+                self.modal.plane = plane
+        if 20.0 in gs:
+            self.modal.unit = INCH
+        if 21.0 in gs:
+            self.modal.unit = 1.0
+        # 13 cutter radius compensation: only with a zero radius, where it does not move the path
+        if 41.0 in gs or 42.0 in gs:
+            d = vals.get("d")
+            used.add("d")
+            tool = self.tool if d is None else int(d)
+            radius = self._tool(tool).diameter / 2 if tool else 0.0
+            if radius > 0:
+                raise InterpError(f"cutter radius compensation G{41 if 41.0 in gs else 42} with tool {tool} of "
+                                  f"radius {radius:g} mm is not supported")
+        # 14 tool length offset
+        if 43.0 in gs:
+            h = int(vals["h"]) if "h" in vals else self.tool
+            used.add("h")
+            entry = self._tool(h).offsets if h else {}
+            self.tlo = {a: entry.get(a, 0.0) for a in AXES}
+        if 43.1 in gs:
+            self.tlo = {a: 0.0 for a in AXES}
+            for a in AXES:
+                if a.lower() in vals:
+                    self.tlo[a] = vals[a.lower()] * self.scale(a)
+                    used.add(a.lower())
+        if 49.0 in gs:
+            self.tlo = {a: 0.0 for a in AXES}
+        # 15 coordinate system
+        for g, index in _COORD_SYSTEMS.items():
+            if g in gs:
+                self.modal.coord = index
+                self._mirror_offsets()
+        # 16 path control
+        if 61.0 in gs or 61.1 in gs:
+            self.modal.blend = None
+        if 64.0 in gs:
+            self.modal.blend = vals["p"] * self.modal.unit if "p" in vals else math.inf
+            used |= {"p", "q"}
+        # 17 distance modes, 18 retract mode
+        for g, attr, value in ((90.0, "absolute", True), (91.0, "absolute", False), (90.1, "arc_absolute", True),
+                               (91.1, "arc_absolute", False), (98.0, "retract_initial", True),
+                               (99.0, "retract_initial", False)):
+            if g in gs:
+                setattr(self.modal, attr, value)
+
+        # 19 non-modal: G10, G28/G30 (+ .1), G92 family
+        axis_words = {a: vals[a.lower()] for a in AXES if a.lower() in vals}
+        polar = {k: vals[k] for k in "@^" if k in vals}
+        motion_done = False
+        if 10.0 in gs:
+            self._g10(vals, axis_words)
+            used |= {"l", "p", "r"} | {a.lower() for a in axis_words}
+            axis_words = {}
+        elif 28.0 in gs or 30.0 in gs:
+            self._home(28 if 28.0 in gs else 30, axis_words, 53.0 in gs)
+            axis_words, motion_done = {}, True
+        elif 28.1 in gs or 30.1 in gs:
+            base = G28_BASE if 28.1 in gs else G30_BASE
+            for k, a in enumerate(AXES):
+                self.params.set(base + k, self.pos[a])
+        elif 92.0 in gs:
+            if not axis_words:
+                raise InterpError("G92 without axis words")
+            for a, v in axis_words.items():
+                # program value v at the current position: G92 offset takes up the difference
+                self.g92[a] = self.pos[a] - self.g5x[self.modal.coord][a] - self.tlo[a] - v * self.scale(a)
+            self.params.set(G92_BASE - 1, 1.0)
+            self._mirror_offsets()
+            axis_words = {}
+        elif 92.1 in gs or 92.2 in gs:
+            self.g92 = {a: 0.0 for a in AXES}
+            if 92.1 in gs:
+                self.params.set(G92_BASE - 1, 0.0)
+                self._mirror_offsets()
+        elif 92.3 in gs:
+            self.g92 = {a: self.params.get(G92_BASE + k) for k, a in enumerate(AXES)}
+
+        # 20 motion
+        if motions:
+            self.modal.motion = _MOTION[motions[0]]
+        has_motion_words = bool(axis_words or polar)
+        if not motion_done and (motions or has_motion_words):
+            motion = self.modal.motion
+            if motion is None or motion == "G80":
+                if has_motion_words:
+                    raise InterpError("axis words without a motion mode (G0/G1/G2/G3 or a canned cycle)")
+            else:
+                used |= self._motion(motion, vals, axis_words, polar, 53.0 in gs, bool(motions))
+        if 80.0 in gs or (motions and motions[0] not in (73.0, 81.0, 82.0, 83.0, 85.0, 86.0, 89.0)):
+            self._cycle_first = True
+        used |= {k for k in vals if k.upper() in AXES} | set(polar)
+        for letter in vals:
+            if letter not in used:
+                raise InterpError(f"word {letter.upper()}{vals[letter]:g} is not used by any code in the block")
+        # 21 stops
+        if 2 in ms or 30 in ms:
+            on_end()
+
+    def on_m73(self) -> None:  # replaced by the flow, which knows the call frames
+        raise InterpError("M73 outside a subroutine")
+
+    def snapshot(self) -> Modal:
+        return replace(self.modal)
+
+    def restore(self, modal: Modal) -> None:
+        self.modal = replace(modal)
+
+    def _check_tool(self, number: int, word: str) -> None:
+        if number and self.tools is not None and number not in self.tools:
+            raise InterpError(f"{word}{number}: tool {number} is not in the tool table")
+
+    def _tool(self, number: int) -> Tool:
+        if self.tools is None:
+            raise InterpError(f"tool {number} used for an offset, but no tool table was given (--tool-table)")
+        if number not in self.tools:
+            raise InterpError(f"tool {number} is not in the tool table")
+        return self.tools[number]
+
+    def _g10(self, vals: dict[str, float], axis_words: dict[str, float]) -> None:
+        l = vals.get("l")
+        if l not in (2.0, 20.0):
+            raise InterpError(f"G10 L{l:g} (tool table edits) is not supported; G10 L2 and L20 are" if l is not None
+                              else "G10 without L")
+        if vals.get("r", 0.0) != 0.0:
+            raise InterpError("G10 L2 R (coordinate system rotation) is not supported")
+        p = int(vals.get("p", 0))
+        index = self.modal.coord if p == 0 else p
+        if not 1 <= index <= 9:
+            raise InterpError(f"G10 P{p}: coordinate system must be 0..9")
+        for a, v in axis_words.items():
+            if l == 2.0:
+                self.g5x[index][a] = v * self.scale(a)
+            else:  # L20: the current position gets program value v in that system
+                self.g5x[index][a] = self.pos[a] - self.g92[a] - self.tlo[a] - v * self.scale(a)
+        self._mirror_offsets()
+
+    def _home(self, which: int, axis_words: dict[str, float], g53: bool) -> None:
+        """G28/G30: rapid to the programmed intermediate point, then to the stored position."""
+        if axis_words:
+            inter = {a: (self.pos[a] + v * self.scale(a)) if not self.modal.absolute else self.machine(a, v)
+                     for a, v in axis_words.items()}
+            self.emit("G0", inter)
+        base = G28_BASE if which == 28 else G30_BASE
+        axes = list(axis_words) if axis_words else list(AXES)
+        # LinuxCNC's home move ends at the stored machine position; the tool length offset
+        # stays applied (the canonical position is the stored one minus the offset).
+        target = {a: self.params.get(base + AXES.index(a)) for a in axes}
+        self.emit("G0", target)
+
+    def _motion(self, motion: str, vals: dict[str, float], axis_words: dict[str, float], polar: dict[str, float],
+                g53: bool, explicit: bool) -> set[str]:
+        if motion in SUPPORTED_CYCLES:
+            return self._cycle(motion, vals, axis_words, polar)
+        target = self._target(axis_words, polar, g53)
+        if motion in ("G0", "G1"):
+            self.emit(motion, target)
+            return set()
+        if g53:
+            raise InterpError("G53 with an arc")
+        return self._arc(motion, vals, target)
+
+    def _target(self, axis_words: dict[str, float], polar: dict[str, float], g53: bool) -> dict[str, float]:
+        target: dict[str, float] = {}
+        for a, v in axis_words.items():
+            if g53:
+                if not self.modal.absolute:
+                    raise InterpError("G53 in incremental mode (G91)")
+                target[a] = v * self.scale(a)  # machine coordinates
+            elif self.modal.absolute:
+                target[a] = self.machine(a, v)
+            else:
+                target[a] = self.pos[a] + v * self.scale(a)
+        if polar:
+            if "X" in axis_words or "Y" in axis_words:
+                raise InterpError("polar coordinates (@ ^) together with X or Y")
+            x, y = self.program("X"), self.program("Y")
+            r, theta = math.hypot(x, y), math.atan2(y, x)
+            if self.modal.absolute:
+                r = polar.get("@", r)
+                theta = math.radians(polar["^"]) if "^" in polar else theta
+            else:
+                if x == 0 and y == 0:
+                    raise InterpError("incremental polar motion is undefined at the origin")
+                r += polar.get("@", 0.0)
+                theta += math.radians(polar.get("^", 0.0))
+            target["X"] = self.machine("X", r * math.cos(theta))
+            target["Y"] = self.machine("Y", r * math.sin(theta))
+        return target
+
+    def _arc(self, motion: str, vals: dict[str, float], target: dict[str, float]) -> set[str]:
+        plane = self.modal.plane
+        a1, a2, normal, l1, l2 = PLANES[plane]
+        other = {"i", "j", "k"} - {l1, l2}
+        for letter in other:
+            if letter in vals:
+                raise InterpError(f"{letter.upper()} offset with an arc in the {plane} plane (G{ {'XY': 17, 'XZ': 18, 'YZ': 19}[plane] })")
+        x0, y0 = self.pos[a1], self.pos[a2]
+        x1, y1 = target.get(a1, x0), target.get(a2, y0)
+        turns = 1
+        if "p" in vals:
+            if vals["p"] != int(vals["p"]) or vals["p"] < 1:
+                raise InterpError(f"arc P{vals['p']:g}: the number of turns must be a whole number >= 1")
+            turns = int(vals["p"])
+        u = self.modal.unit
+        if "r" in vals:
+            if l1 in vals or l2 in vals:
+                raise InterpError("arc with both R and centre offsets")
+            cx, cy = center_from_radius(x0, y0, x1, y1, vals["r"] * u, motion == "G2")
+        else:
+            if l1 not in vals and l2 not in vals:
+                raise InterpError(f"{motion} arc without centre offsets ({l1.upper()}{l2.upper()}) or R")
+            if self.modal.arc_absolute:
+                cx = self.machine(a1, vals.get(l1, 0.0))
+                cy = self.machine(a2, vals.get(l2, 0.0))
+            else:
+                cx, cy = x0 + vals.get(l1, 0.0) * u, y0 + vals.get(l2, 0.0) * u
+        r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
+        if r0 < 1e-9:
+            raise InterpError("arc radius is zero")
+        if abs(r0 - r1) > max(0.002, 1e-3 * r0):
+            raise InterpError(f"arc end radius {r1:.4f} mm differs from start radius {r0:.4f} mm")
+        full = {a1: x1, a2: y1}
+        full.update({a: v for a, v in target.items() if a not in full})
+        th0, th1 = math.atan2(y0 - cy, x0 - cx), math.atan2(y1 - cy, x1 - cx)
+        if motion == "G3":
+            sweep = (th1 - th0) % (2 * math.pi) or 2 * math.pi
+        else:
+            sweep = (th0 - th1) % (2 * math.pi) or 2 * math.pi
+        sweep += 2 * math.pi * (turns - 1)
+        planar = 0.5 * (r0 + r1) * sweep
+        axial = math.sqrt(sum((full[a] - self.pos[a]) ** 2 for a in full if a not in (a1, a2) and a not in ROTARY))
+        self.emit(motion, full, center={a1: cx, a2: cy}, plane=plane, turns=turns, length_mm=math.hypot(planar, axial))
+        return {l1, l2, "r", "p"}
+
+    def _cycle(self, motion: str, vals: dict[str, float], axis_words: dict[str, float], polar: dict[str, float]) -> set[str]:
+        if self.modal.plane != "XY":
+            raise InterpError(f"{motion} canned cycle outside the XY plane (G17) is not supported")
+        if set(axis_words) - {"X", "Y", "Z"}:
+            raise InterpError(f"{motion} canned cycle with axis {sorted(set(axis_words) - {'X', 'Y', 'Z'})[0]}")
+        first = getattr(self, "_cycle_first", True) or self._cycle_motion != motion
+        words = {a.lower(): v for a, v in axis_words.items()}
+        words.update({k: vals[k] for k in "rlpq" if k in vals})
+        if polar:
+            if self.modal.absolute:
+                target = self._target({}, polar, False)
+                words["x"], words["y"] = (target["X"] - self.offset("X")) / self.modal.unit, (target["Y"] - self.offset("Y")) / self.modal.unit
+            else:
+                words.update(polar)
+        current = (self.program("X"), self.program("Y"), self.program("Z"))
+        moves, _ = expand_cycle(motion, first, words, self.cycle, current, not self.modal.absolute,
+                                self.modal.retract_initial, self.modal.unit == INCH, InterpError)
+        blend, self.modal.blend = self.modal.blend, None  # cycles run in exact path (LinuxCNC)
+        for mv in moves:
+            if mv.kind == "G4":
+                self.dwell(mv.dwell_s)
+                continue
+            target = {"X": self.machine("X", mv.x), "Y": self.machine("Y", mv.y), "Z": self.machine("Z", mv.z)}
+            self.emit(mv.kind, {a: v for a, v in target.items() if abs(v - self.pos[a]) > 0 or a == "Z"})
+        self.modal.blend = blend
+        self._cycle_first = False
+        self._cycle_motion = motion
+        return {"r", "l", "p", "q"}
+
+    _cycle_first: bool = True
+    _cycle_motion: str = ""
+
+
+def center_from_radius(x0: float, y0: float, x1: float, y1: float, r: float, clockwise: bool) -> tuple[float, float]:
+    """Arc centre from the chord and radius; r < 0 selects the arc longer than 180°."""
+    dx, dy = x1 - x0, y1 - y0
+    chord = math.hypot(dx, dy)
+    if chord < 1e-9:
+        raise InterpError("radius-format arc cannot be a full circle (use I/J/K)")
+    if abs(r) < chord / 2 - 1e-6:
+        raise InterpError(f"arc radius {abs(r):.4f} mm is shorter than half the chord {chord / 2:.4f} mm")
+    h = math.sqrt(max(r * r - chord * chord / 4, 0.0))
+    nx, ny = -dy / chord, dx / chord  # left normal of the chord
+    side = -1.0 if clockwise else 1.0
+    if r < 0:
+        side = -side
+    return (x0 + dx / 2 + side * h * nx, y0 + dy / 2 + side * h * ny)
