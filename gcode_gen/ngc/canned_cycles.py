@@ -12,7 +12,7 @@ in program coordinates of the active system:
 * each of the L repeats: rapid in XY at the current height, rapid down to R (if not there),
   then the cycle: G81 feed to Z, rapid out; G82 the same with a dwell P at the bottom;
   G73 pecks of Q with a rapid back-off of 0.010 in (0.254 mm); G83 pecks of Q, rapid out to
-  the retract height and back down to 0.010 in above the last depth; G85 feed in, feed out;
+  R and back down to 0.010 in above the last depth; G85 feed in, feed out;
   G86 feed in, dwell P, rapid out (spindle stopped); G89 feed in, dwell P, feed out.
 
 G84 (tapping), G87 (back boring) and G88 (manual retract) need the spindle or the
@@ -137,7 +137,7 @@ def _cycle_body(motion: str, x: float, y: float, r: float, clear: float, bottom:
         while depth > bottom:
             out.append(feed(depth))
             if motion == "G83":
-                out.append(rapid(clear))
+                out.append(rapid(r))
             out.append(rapid(depth + delta))
             depth -= state.q
         return out + [feed(bottom), rapid(clear)]

@@ -6,7 +6,7 @@ compensation, tool length offset, coordinate system, path mode, distance modes, 
 mode, G10/G28/G30/G92, motion, stops) and appends :class:`~gcode_gen.program.Block` moves.
 
 Coordinates: the machine starts at the origin of machine coordinates, G54 active, no
-offsets, mm, XY plane, G90, G91.1, G94, G64 (LinuxCNC's and rs274's start state).  A
+offsets, mm, XY plane, G90, G91.1, G94, G64, G99 (rs274's start state without an INI file).  A
 programmed value v of a linear axis in the active system is the machine position
 ``v·unit + G5x offset + G92 offset + tool length offset`` (mm); the blocks carry machine
 positions.  Rotary axes are in degrees and never scaled.
@@ -63,7 +63,7 @@ class Modal:
     arc_absolute: bool = False
     inverse_time: bool = False
     feed: float | None = None
-    retract_initial: bool = True  # G98
+    retract_initial: bool = False  # G98 (True) / G99 (False, rs274's start state)
     coord: int = 1
     blend: float | None = math.inf  # None: exact stop (G61/G61.1); inf: G64 without P; else G64 P (mm)
     motion: str | None = None
@@ -120,6 +120,8 @@ class Machine:
             return None
         f = self.modal.feed
         if f is None:
+            if self.modal.inverse_time:
+                raise InterpError(f"{motion} move in inverse time feed (G93) needs F in its block")
             raise InterpError(f"{motion} move without a programmed feed (F)")
         if f <= 0:
             raise InterpError(f"{motion} move with feed F{f:g} (the feed must be positive)")
@@ -183,6 +185,8 @@ class Machine:
             if g not in known:
                 raise InterpError(f"unknown or unsupported G-code G{g:g}")
         used: set[str] = {"n"}
+        if self.modal.inverse_time and "f" not in vals:
+            self.modal.feed = None  # G93: every feed block carries its own F
 
         # 2-3 feed mode and rate
         if 93.0 in gs:
@@ -195,8 +199,6 @@ class Machine:
                 raise InterpError(f"feed F{vals['f']:g} must not be negative")
             self.modal.feed = vals["f"]
             used.add("f")
-        elif self.modal.inverse_time and motions and motions[0] in ("G1", "G2", "G3"):
-            raise InterpError("inverse time feed (G93) needs F in every feed block")
         used.add("s")
         # 5-6 tool select and change (no motion); M61 sets the tool number
         if "t" in vals:
