@@ -34,7 +34,7 @@ _COORD_SYSTEMS = {54.0: 1, 55.0: 2, 56.0: 3, 57.0: 4, 58.0: 5, 59.0: 6, 59.1: 7,
 _MOTION = {0.0: "G0", 1.0: "G1", 2.0: "G2", 3.0: "G3", 73.0: "G73", 80.0: "G80", 81.0: "G81", 82.0: "G82",
            83.0: "G83", 84.0: "G84", 85.0: "G85", 86.0: "G86", 87.0: "G87", 88.0: "G88", 89.0: "G89"}
 #: G-codes that only set a mode this interpreter does not need (or that is its only mode).
-_NO_EFFECT_G = {40.0, 94.0, 97.0, 96.0, 17.1, 18.1, 19.1}
+_NO_EFFECT_G = {40.0, 94.0, 97.0, 96.0}
 #: M-codes without motion: stops, spindle, coolant, overrides, digital/analog I/O.
 _NO_MOTION_M = {0, 1, 3, 4, 5, 7, 8, 9, 48, 49, 50, 51, 52, 53, 60, 62, 63, 64, 65}
 _REFUSED_G = {
