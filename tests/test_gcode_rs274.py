@@ -343,3 +343,70 @@ def test_a_wrong_move_is_found(tmp_path):
     blocks, _ = interpret("G21\nG0 X1 Y2\nG1 X3.01 F100\nM2\n")
     agreement = compare(blocks, run_rs274(path).moves)
     assert agreement.problem is not None and "end X" in agreement.problem
+
+
+# ---- cutter radius compensation ---------------------------------------------------------
+
+COMP = """G21 G17 G90
+G0 X-10 Y0
+G41 D1
+G1 X0 Y0 F100
+G1 X10 Y0
+G1 X10 Y10
+G1 X20 Y10
+G1 X20 Y0
+G40
+G1 X30 Y-5
+M2
+"""
+
+
+def test_cutter_compensation_offsets_the_path_and_rounds_convex_corners():
+    tools = parse_tool_table("T1 P1 Z0 D2\n")  # radius 1 mm
+    blocks, _ = interpret(COMP, tools=tools)
+    moves = [(b.motion, round(b.target["X"], 9), round(b.target["Y"], 9)) for b in blocks[1:]]
+    assert moves == [
+        ("G1", 0.0, 1.0),     # entry: tangent to the tool circle at the programmed end, on the left
+        ("G1", 9.0, 1.0),     # concave corner at (10, 0): end pulled back to where the offsets meet
+        ("G1", 9.0, 10.0),
+        ("G2", 10.0, 11.0),   # convex corner at (10, 10): an arc about the programmed corner
+        ("G1", 20.0, 11.0),
+        ("G2", 21.0, 10.0),   # convex corner at (20, 10)
+        ("G1", 21.0, 0.0),
+        ("G1", 30.0, -5.0),   # exit after G40: to the programmed point
+    ]
+    assert blocks[4].center == {"X": 10.0, "Y": 10.0} and blocks[6].center == {"X": 20.0, "Y": 10.0}
+    assert all(b.feed == pytest.approx(100 / 60) for b in blocks[1:])
+
+
+def test_cutter_compensation_gouge_and_modes_are_refused():
+    tools = parse_tool_table("T1 P1 Z0 D6\n")  # a 1 mm step is too small for a 3 mm radius
+    with pytest.raises(ProgramError, match=r"p:7: .*gouging"):
+        interpret("G21\nG0 X-10 Y0\nG41 D1\nG1 X0 Y0 F100\nG1 X10 Y0\nG1 X10 Y1\nG1 X20 Y1\nM2\n", tools=tools, name="p")
+    with pytest.raises(ProgramError, match="G81 canned cycle with cutter radius compensation on"):
+        interpret("G21\nG41\nG81 R1 Z-1 F10\n", tools=tools)
+    with pytest.raises(ProgramError, match="just after G40 must be straight"):
+        interpret("G21 F10\nG0 X-5\nG41 D1\nG1 X0\nG1 X10\nG40\nG2 X20 R5\n", tools=parse_tool_table("T1 D1\n"))
+
+
+@needs_rs274
+@pytest.mark.parametrize("sample", ["comp-g1.ngc", "comp311.ngc", "gmoccapy_2_tools_with_cutter_radius_compensation.ngc",
+                                    "useful-subroutines.ngc"])
+def test_cutter_compensation_samples_agree_with_rs274(sample):
+    path = NCFILES / sample
+    if not path.exists():
+        pytest.skip(f"{path} not installed")
+    agreement = _agree(path)
+    assert agreement.problem is None and agreement.n_moves > 5
+
+
+@needs_rs274
+def test_cutter_compensation_program_agrees_with_rs274(tmp_path):
+    path = tmp_path / "comp.ngc"
+    path.write_text(COMP.replace("G21", "G20"))  # tools.tbl T1: D 0.125 in
+    assert _agree(path).problem is None
+
+
+def test_g94_resets_the_feed_as_linuxcnc():
+    with pytest.raises(ProgramError, match="without a programmed feed"):
+        interpret("G21 F100\nG1 X1\nG94\nG1 X2\n")

@@ -8,6 +8,7 @@ The interpreter is split by job:
 * :mod:`~gcode_gen.ngc.subroutines` — O-word subroutines, conditionals and loops;
 * :mod:`~gcode_gen.ngc.machine` — the modal state, offsets, and the moves of a block;
 * :mod:`~gcode_gen.ngc.canned_cycles` — G73/G81–G89 expanded into moves;
+* :mod:`~gcode_gen.ngc.cutter_comp` — cutter radius compensation G41/G42;
 * :mod:`~gcode_gen.ngc.tool_table` — LinuxCNC tool table files.
 
 :func:`interpret` runs a program the way LinuxCNC's interpreter does (checked against its
@@ -96,6 +97,7 @@ def interpret(text: str, *, name: str = "program", dialect: str = "linuxcnc",
     try:
         flow = Flow(lines, value, params, machine)
         flow.run(block, percent)
+        machine.finish()
     except ProgramError:
         raise
     except (InterpError, ExprError) as exc:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 from gcode_gen.ngc.canned_cycles import SUPPORTED_CYCLES, CycleState, expand_cycle
+from gcode_gen.ngc.cutter_comp import LEFT, RIGHT, CompError, CutterComp, QueuedMove
 from gcode_gen.ngc.parameters import COORD_SYSTEM, G5X_BASE, G28_BASE, G30_BASE, G92_BASE, Parameters
 from gcode_gen.ngc.tool_table import Tool
 from gcode_gen.program import Block
@@ -87,8 +88,30 @@ class Machine:
     comp_radius: float = 0.0
     cycle: CycleState = field(default_factory=CycleState)
     saved_modal: Modal | None = None
+    comp: CutterComp | None = None
+    force_axes: set[str] = field(default_factory=set)  # axes the next move must name (after G40)
+    actual: dict[str, float] = field(default_factory=lambda: {a: 0.0 for a in AXES})  # where the last move ended
+    arc_not_allowed: bool = False
     line: int = 0
     n: int | None = None
+
+    def __post_init__(self) -> None:
+        self.comp = CutterComp(self._output_queued)
+
+    def _output_queued(self, q: QueuedMove) -> None:
+        """A compensated move leaves the queue: it becomes a block."""
+        if q.kind == "G4":
+            self.blocks.append(Block(line=q.line, n=q.n, motion="G4", target={}, dwell_s=q.dwell_s))
+            return
+        target = {"X": q.x, "Y": q.y, **q.rest}
+        self.actual.update(target)
+        centre = {"X": q.cx, "Y": q.cy} if q.kind in ("G2", "G3") else None
+        self.blocks.append(Block(line=q.line, n=q.n, motion=q.kind, target=target, feed=q.feed, center=centre,
+                                 turns=max(1, abs(q.turn)) if centre else 1, blend_tolerance=self.modal.blend))
+
+    def finish(self) -> None:
+        """Program end: compensated moves still queued are made."""
+        self.comp.dequeue()
 
     # ---- coordinates --------------------------------------------------------------------
     def offset(self, axis: str) -> float:
@@ -131,17 +154,24 @@ class Machine:
 
     def emit(self, motion: str, target: dict[str, float], *, center: dict[str, float] | None = None,
              plane: str = "XY", turns: int = 1, length_mm: float | None = None) -> None:
-        moved = {a: v for a, v in target.items() if a in target}
+        moved = dict(target)
+        for a in self.force_axes:
+            moved.setdefault(a, self.pos[a])
+        self.force_axes = set()
         if length_mm is None:
             length_mm = math.sqrt(sum((moved[a] - self.pos[a]) ** 2 for a in moved if a not in ROTARY))
         self.blocks.append(Block(line=self.line, n=self.n, motion=motion, target=moved,
                                  feed=self.feed_mm_s(motion, length_mm), center=center, plane=plane, turns=turns,
                                  blend_tolerance=self.modal.blend))
         self.pos.update(moved)
+        self.actual.update(moved)
 
     def dwell(self, seconds: float) -> None:
         if seconds < 0:
             raise InterpError(f"negative dwell {seconds:g} s")
+        if self.comp.queue:
+            self.comp.enqueue(QueuedMove("G4", dwell_s=seconds, line=self.line, n=self.n))
+            return
         self.blocks.append(Block(line=self.line, n=self.n, motion="G4", target={}, dwell_s=seconds))
 
     # ---- one block ----------------------------------------------------------------------
@@ -192,8 +222,9 @@ class Machine:
         if 93.0 in gs:
             self.modal.inverse_time = True
             self.modal.feed = None
-        if 94.0 in gs:
+        if 94.0 in gs:  # LinuxCNC sets the feed to 0 with G94: a feed move needs a new F
             self.modal.inverse_time = False
+            self.modal.feed = None
         if "f" in vals:
             if vals["f"] < 0:
                 raise InterpError(f"feed F{vals['f']:g} must not be negative")
@@ -206,7 +237,12 @@ class Machine:
             self._check_tool(self.selected, "T")
             used.add("t")
         if 6 in ms:
+            self._refuse_with_comp("tool change M6")
             self.tool = self.selected
+            # LinuxCNC re-reads the position after a tool change: where the machine is, which
+            # after G40 is the compensated point, not the programmed one the interpreter assumed.
+            self.pos = dict(self.actual)
+            self.force_axes = set()
         if 61 in ms:
             if "q" not in vals:
                 raise InterpError("M61 without a tool number Q")
@@ -245,15 +281,22 @@ class Machine:
             self.modal.unit = INCH
         if 21.0 in gs:
             self.modal.unit = 1.0
-        # 13 cutter radius compensation: only with a zero radius, where it does not move the path
+        # 13 cutter radius compensation
+        if 40.0 in gs:
+            self._comp_off()
         if 41.0 in gs or 42.0 in gs:
+            if self.modal.plane != "XY":
+                raise InterpError("cutter radius compensation outside the XY plane (G17) is not supported")
             d = vals.get("d")
             used.add("d")
+            if d is not None and (d != int(d) or d < 0):
+                raise InterpError(f"D{d:g}: the tool number for G41/G42 must be a whole number >= 0")
             tool = self.tool if d is None else int(d)
             radius = self._tool(tool).diameter / 2 if tool else 0.0
-            if radius > 0:
-                raise InterpError(f"cutter radius compensation G{41 if 41.0 in gs else 42} with tool {tool} of "
-                                  f"radius {radius:g} mm is not supported")
+            try:
+                self.comp.start(LEFT if 41.0 in gs else RIGHT, radius, (self.pos["X"], self.pos["Y"], self.pos["Z"]))
+            except CompError as exc:
+                raise InterpError(str(exc)) from None
         # 14 tool length offset
         if 43.0 in gs:
             h = int(vals["h"]) if "h" in vals else self.tool
@@ -290,6 +333,8 @@ class Machine:
         axis_words = {a: vals[a.lower()] for a in AXES if a.lower() in vals}
         polar = {k: vals[k] for k in "@^" if k in vals}
         motion_done = False
+        if any(g in gs for g in (10.0, 28.0, 30.0, 92.0, 92.1, 92.2, 92.3, 43.0, 43.1, 49.0)):
+            self._refuse_with_comp("G10/G28/G30/G43/G49/G92")
         if 10.0 in gs:
             self._g10(vals, axis_words)
             used |= {"l", "p", "r"} | {a.lower() for a in axis_words}
@@ -337,7 +382,26 @@ class Machine:
                 raise InterpError(f"word {letter.upper()}{vals[letter]:g} is not used by any code in the block")
         # 21 stops
         if 2 in ms or 30 in ms:
+            self._comp_off()
             on_end()
+
+    def _comp_off(self) -> None:
+        """G40: flush the queue; the programmed point becomes the current one (LinuxCNC)."""
+        try:
+            jumped = self.comp.stop((self.pos["X"], self.pos["Y"]))
+        except CompError as exc:
+            raise InterpError(str(exc)) from None
+        if jumped:
+            px, py, pz = self.comp.program
+            for a, v in (("X", px), ("Y", py), ("Z", pz)):
+                if v != self.pos[a]:
+                    self.force_axes.add(a)
+                self.pos[a] = v
+            self.arc_not_allowed = True
+
+    def _refuse_with_comp(self, what: str) -> None:
+        if self.comp.side:
+            raise InterpError(f"{what} with cutter radius compensation on (G40 first)")
 
     def on_m73(self) -> None:  # replaced by the flow, which knows the call frames
         raise InterpError("M73 outside a subroutine")
@@ -393,7 +457,15 @@ class Machine:
     def _motion(self, motion: str, vals: dict[str, float], axis_words: dict[str, float], polar: dict[str, float],
                 g53: bool, explicit: bool) -> set[str]:
         if motion in SUPPORTED_CYCLES:
+            self._refuse_with_comp(f"{motion} canned cycle")
             return self._cycle(motion, vals, axis_words, polar)
+        if motion in ("G2", "G3") and self.arc_not_allowed:
+            raise InterpError("the move just after G40 must be straight, not an arc")
+        self.arc_not_allowed = False
+        if self.comp.active:
+            if g53:
+                raise InterpError("G53 with cutter radius compensation on")
+            return self._comp_motion(motion, vals, axis_words, polar)
         target = self._target(axis_words, polar, g53)
         if motion in ("G0", "G1"):
             self.emit(motion, target)
@@ -402,7 +474,45 @@ class Machine:
             raise InterpError("G53 with an arc")
         return self._arc(motion, vals, target)
 
-    def _target(self, axis_words: dict[str, float], polar: dict[str, float], g53: bool) -> dict[str, float]:
+    def _comp_motion(self, motion: str, vals: dict[str, float], axis_words: dict[str, float],
+                     polar: dict[str, float]) -> set[str]:
+        """A G0/G1/G2/G3 under cutter radius compensation (see :mod:`cutter_comp`)."""
+        base = dict(self.pos)
+        if not self.comp.firstmove:  # LinuxCNC: relative to the programmed, not the tool, point
+            base["X"], base["Y"], base["Z"] = self.comp.program
+        target = self._target(axis_words, polar, False, base)
+        p = (target.get("X", base["X"]), target.get("Y", base["Y"]), target.get("Z", base["Z"]))
+        rest = {a: v for a, v in target.items() if a not in ("X", "Y", "Z")}
+        programmed_len = math.dist(p, (base["X"], base["Y"], base["Z"]))
+        feed = self.feed_mm_s(motion if motion != "G0" else "G0", programmed_len)
+        cur = (self.pos["X"], self.pos["Y"], self.pos["Z"])
+
+        def make(kind: str, x: float, y: float, z: float, dx: float, dy: float, centre=None, turn: int = 0,  # noqa: ANN001
+                 original: float = 0.0) -> QueuedMove:
+            extra = dict(rest)
+            if z != cur[2] or "Z" in target:
+                extra["Z"] = z
+            return QueuedMove(kind, x, y, extra, dx, dy, *(centre or (0.0, 0.0)), turn, original,
+                              None if kind == "G0" else feed, line=self.line, n=self.n)
+
+        try:
+            if motion in ("G0", "G1"):
+                new = self.comp.straight(motion, cur, p, make)
+                used: set[str] = set()
+            else:
+                turns = int(vals.get("p", 1))
+                centre_of = lambda sx, sy: self._arc_centre(motion, vals, "i", "j", "X", "Y", (sx, sy), p[:2])  # noqa: E731
+                new = self.comp.arc(motion, cur, p, centre_of, turns, make)
+                used = {"i", "j", "r", "p"}
+        except CompError as exc:
+            raise InterpError(str(exc)) from None
+        self.pos["X"], self.pos["Y"], self.pos["Z"] = new
+        self.pos.update(rest)
+        return used
+
+    def _target(self, axis_words: dict[str, float], polar: dict[str, float], g53: bool,
+                base: dict[str, float] | None = None) -> dict[str, float]:
+        base = self.pos if base is None else base
         target: dict[str, float] = {}
         for a, v in axis_words.items():
             if g53:
@@ -412,7 +522,7 @@ class Machine:
             elif self.modal.absolute:
                 target[a] = self.machine(a, v)
             else:
-                target[a] = self.pos[a] + v * self.scale(a)
+                target[a] = base[a] + v * self.scale(a)
         if polar:
             if "X" in axis_words or "Y" in axis_words:
                 raise InterpError("polar coordinates (@ ^) together with X or Y")
@@ -444,24 +554,8 @@ class Machine:
             if vals["p"] != int(vals["p"]) or vals["p"] < 1:
                 raise InterpError(f"arc P{vals['p']:g}: the number of turns must be a whole number >= 1")
             turns = int(vals["p"])
-        u = self.modal.unit
-        if "r" in vals:
-            if l1 in vals or l2 in vals:
-                raise InterpError("arc with both R and centre offsets")
-            cx, cy = center_from_radius(x0, y0, x1, y1, vals["r"] * u, motion == "G2")
-        else:
-            if l1 not in vals and l2 not in vals:
-                raise InterpError(f"{motion} arc without centre offsets ({l1.upper()}{l2.upper()}) or R")
-            if self.modal.arc_absolute:
-                cx = self.machine(a1, vals.get(l1, 0.0))
-                cy = self.machine(a2, vals.get(l2, 0.0))
-            else:
-                cx, cy = x0 + vals.get(l1, 0.0) * u, y0 + vals.get(l2, 0.0) * u
+        cx, cy = self._arc_centre(motion, vals, l1, l2, a1, a2, (x0, y0), (x1, y1))
         r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
-        if r0 < 1e-9:
-            raise InterpError("arc radius is zero")
-        if abs(r0 - r1) > max(0.002, 1e-3 * r0):
-            raise InterpError(f"arc end radius {r1:.4f} mm differs from start radius {r0:.4f} mm")
         full = {a1: x1, a2: y1}
         full.update({a: v for a, v in target.items() if a not in full})
         th0, th1 = math.atan2(y0 - cy, x0 - cx), math.atan2(y1 - cy, x1 - cx)
@@ -474,6 +568,28 @@ class Machine:
         axial = math.sqrt(sum((full[a] - self.pos[a]) ** 2 for a in full if a not in (a1, a2) and a not in ROTARY))
         self.emit(motion, full, center={a1: cx, a2: cy}, plane=plane, turns=turns, length_mm=math.hypot(planar, axial))
         return {l1, l2, "r", "p"}
+
+    def _arc_centre(self, motion: str, vals: dict[str, float], l1: str, l2: str, a1: str, a2: str,
+                    start: tuple[float, float], end: tuple[float, float]) -> tuple[float, float]:
+        """Centre (machine mm) of an arc from ``start`` to ``end`` in the plane's axes a1, a2."""
+        (x0, y0), (x1, y1) = start, end
+        u = self.modal.unit
+        if "r" in vals:
+            if l1 in vals or l2 in vals:
+                raise InterpError("arc with both R and centre offsets")
+            return center_from_radius(x0, y0, x1, y1, vals["r"] * u, motion == "G2")
+        if l1 not in vals and l2 not in vals:
+            raise InterpError(f"{motion} arc without centre offsets ({l1.upper()}{l2.upper()}) or R")
+        if self.modal.arc_absolute:
+            cx, cy = self.machine(a1, vals.get(l1, 0.0)), self.machine(a2, vals.get(l2, 0.0))
+        else:
+            cx, cy = x0 + vals.get(l1, 0.0) * u, y0 + vals.get(l2, 0.0) * u
+        r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
+        if r0 < 1e-9:
+            raise InterpError("arc radius is zero")
+        if abs(r0 - r1) > max(0.002, 1e-3 * r0):
+            raise InterpError(f"arc end radius {r1:.4f} mm differs from start radius {r0:.4f} mm")
+        return cx, cy
 
     def _cycle(self, motion: str, vals: dict[str, float], axis_words: dict[str, float], polar: dict[str, float]) -> set[str]:
         if self.modal.plane != "XY":
