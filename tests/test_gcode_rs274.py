@@ -410,3 +410,25 @@ def test_cutter_compensation_program_agrees_with_rs274(tmp_path):
 def test_g94_resets_the_feed_as_linuxcnc():
     with pytest.raises(ProgramError, match="without a programmed feed"):
         interpret("G21 F100\nG1 X1\nG94\nG1 X2\n")
+
+
+def test_an_endless_loop_is_stopped_with_a_line():
+    with pytest.raises(ProgramError, match=r"^loop.ngc:[1-3]: more than .* statements executed: an endless loop"):
+        interpret("o1 while [1]\n#1=[#1+1]\no1 endwhile\n", name="loop.ngc")
+
+
+def test_iso_program_numbers_and_cycle_dwell_in_milliseconds():
+    blocks, _ = interpret("O1234 (PART)\nN10 G21 G0 X0 Y0 Z5\nN20 G82 R1 Z-1 P500 F60\n", dialect="iso")
+    assert [b.dwell_s for b in blocks if b.motion == "G4"] == [0.5]
+    with pytest.raises(ProgramError, match="o1234 without a keyword"):
+        interpret("O1234\nG0 X1\n")
+
+
+@pytest.mark.parametrize("text, message", [
+    ("G0 X[EXP[1000]]\n", "out of range"),
+    ("G0 X[10 ** 400]\n", "out of range"),
+    ("T[1/0]\n", "division by zero"),
+])
+def test_numbers_out_of_range_are_errors_with_a_line(text, message):
+    with pytest.raises(ProgramError, match=rf"^p:1: .*{message}"):
+        interpret(text, name="p")

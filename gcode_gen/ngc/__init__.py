@@ -95,7 +95,7 @@ def interpret(text: str, *, name: str = "program", dialect: str = "linuxcnc",
 
     flow = None
     try:
-        flow = Flow(lines, value, params, machine)
+        flow = Flow(lines, value, params, machine, iso=dialect == "iso")
         flow.run(block, percent)
         machine.finish()
     except ProgramError:
@@ -105,4 +105,7 @@ def interpret(text: str, *, name: str = "program", dialect: str = "linuxcnc",
         raise ProgramError(str(exc), line=line, source=name) from None
     except RecursionError:
         raise ProgramError("expression nested too deeply", line=machine.line, source=name) from None
+    except (OverflowError, ValueError) as exc:  # math range errors in expressions, int(inf) …
+        line = flow.current + 1 if flow else machine.line
+        raise ProgramError(f"value out of range: {exc}", line=line, source=name) from None
     return machine.blocks, header

@@ -27,7 +27,7 @@ WORD_LETTERS = "abcdefghijklmnpqrstuvwxyz@^"
 class Line:
     """One program line after lexing.
 
-    kind : "empty", "percent", "oword" or "block".
+    kind : "empty", "percent", "oword", "program_number" (a bare ``O1234``) or "block".
     comments : comment texts as written (for the ``key=value`` header).
     n : block number of a leading ``N`` word.
     words : (letter, value) in order, letters lower case.
@@ -123,6 +123,9 @@ def _lex_oword(code: str, pos: int, line: Line) -> Line:
             raise ExprError(f"O-word without a number or <name> at {code[pos - 1:pos + 10].upper()!r}")
         label, pos = str(int(code[pos:end])), end
     keyword = next((k for k in sorted(OWORD_KEYWORDS, key=len, reverse=True) if code.startswith(k, pos)), None)
+    if keyword is None and pos == len(code) and label.isdigit():
+        line.kind, line.label = "program_number", label
+        return line
     if keyword is None:
         raise ExprError(f"O-word o{label} without a keyword (sub, call, if, while, repeat, …): "
                         f"{code[pos:pos + 10].upper()!r}")

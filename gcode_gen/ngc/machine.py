@@ -155,6 +155,9 @@ class Machine:
     def emit(self, motion: str, target: dict[str, float], *, center: dict[str, float] | None = None,
              plane: str = "XY", turns: int = 1, length_mm: float | None = None) -> None:
         moved = dict(target)
+        for a, v in moved.items():
+            if not math.isfinite(v):
+                raise InterpError(f"{motion} to a non-finite {a} position ({v})")
         for a in self.force_axes:
             moved.setdefault(a, self.pos[a])
         self.force_axes = set()
@@ -449,9 +452,12 @@ class Machine:
             self.emit("G0", inter)
         base = G28_BASE if which == 28 else G30_BASE
         axes = list(axis_words) if axis_words else list(AXES)
-        # LinuxCNC's home move ends at the stored machine position; the tool length offset
-        # stays applied (the canonical position is the stored one minus the offset).
+        # The home move ends at the stored machine position (rs274 prints it minus the
+        # offsets).  Without axis words every axis goes home; only those that move are named,
+        # so a program for an X/Y machine does not appear to move A…W.
         target = {a: self.params.get(base + AXES.index(a)) for a in axes}
+        if not axis_words:
+            target = {a: v for a, v in target.items() if v != self.pos[a]}
         self.emit("G0", target)
 
     def _motion(self, motion: str, vals: dict[str, float], axis_words: dict[str, float], polar: dict[str, float],
@@ -599,6 +605,8 @@ class Machine:
         first = getattr(self, "_cycle_first", True) or self._cycle_motion != motion
         words = {a.lower(): v for a, v in axis_words.items()}
         words.update({k: vals[k] for k in "rlpq" if k in vals})
+        if self.dialect == "iso" and "p" in words:
+            words["p"] /= 1000.0  # Fanuc: cycle dwell P in ms, like G4 P
         if polar:
             if self.modal.absolute:
                 target = self._target({}, polar, False)

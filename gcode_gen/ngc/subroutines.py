@@ -20,6 +20,9 @@ from gcode_gen.ngc.machine import InterpError, Modal
 __all__ = ["Flow"]
 
 MAX_CALL_DEPTH = 100
+#: Statements executed, beyond two per line of the file, before a run is taken for an
+#: endless loop (a straight-through CAM program of any length never reaches it).
+MAX_EXTRA_STATEMENTS = 1_000_000
 
 
 @dataclass
@@ -35,11 +38,12 @@ class Flow:
     """Runs lexed ``lines`` (a list; a lexing failure is stored as the exception) through
     ``block`` (execute one block line) with O-word control flow."""
 
-    def __init__(self, lines: list[Line | Exception], evaluate: Callable, params, machine) -> None:  # noqa: ANN001
+    def __init__(self, lines: list[Line | Exception], evaluate: Callable, params, machine, iso: bool = False) -> None:  # noqa: ANN001
         self.lines = lines
         self.evaluate = evaluate
         self.params = params
         self.machine = machine
+        self.iso = iso
         self.subs: dict[str, tuple[int, int]] = {}
         self.frames: list[_Frame] = []
         self.repeats: dict[int, int] = {}
@@ -114,12 +118,20 @@ class Flow:
     def run(self, block: Callable[[Line], bool], percent: Callable[[int], bool]) -> None:
         """Execute from the first line; ``block`` returns True when the program ended."""
         pc = 0
+        steps, limit = 0, MAX_EXTRA_STATEMENTS + 2 * len(self.lines)
         while pc < len(self.lines):
+            steps += 1
+            if steps > limit:
+                raise self._error(pc, f"more than {limit:,} statements executed: an endless loop?")
             self.current = pc
             ln = self.lines[pc]
             if isinstance(ln, Exception):
                 raise ln
-            if ln.kind == "percent":
+            if ln.kind == "program_number":  # Fanuc "O1234": a program number, no statement
+                if not self.iso:
+                    raise self._error(pc, f"O-word o{ln.label} without a keyword (sub, call, if, while, repeat, …)")
+                pc += 1
+            elif ln.kind == "percent":
                 if percent(pc):
                     return
                 pc += 1
