@@ -421,7 +421,7 @@ class Machine:
 
     def _tool(self, number: int) -> Tool:
         if self.tools is None:
-            raise InterpError(f"tool {number} used for an offset, but no tool table was given (--tool-table)")
+            raise InterpError(f"tool {number} is used for an offset (G43, G41/G42) but no tool table was given")
         if number not in self.tools:
             raise InterpError(f"tool {number} is not in the tool table")
         return self.tools[number]
