@@ -390,7 +390,7 @@ def test_cutter_compensation_gouge_and_modes_are_refused():
 
 
 @needs_rs274
-@pytest.mark.parametrize("sample", ["comp-g1.ngc", "comp311.ngc", "gmoccapy_2_tools_with_cutter_radius_compensation.ngc",
+@pytest.mark.parametrize("sample", ["comp.ngc", "comp-g1.ngc", "comp311.ngc", "gmoccapy_2_tools_with_cutter_radius_compensation.ngc",
                                     "useful-subroutines.ngc"])
 def test_cutter_compensation_samples_agree_with_rs274(sample):
     path = NCFILES / sample

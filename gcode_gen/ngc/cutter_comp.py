@@ -1,4 +1,4 @@
-"""Cutter radius compensation G41/G42 in the XY plane, as LinuxCNC computes it.
+"""Cutter radius compensation G41/G42 in the XY (and XZ) plane, as LinuxCNC computes it.
 
 A port of LinuxCNC's algorithm (interp_convert.cc ``convert_straight_comp1/2``,
 ``convert_arc_comp1/2``; interp_queue.cc): the tool centre runs one tool radius left (G41)
@@ -15,7 +15,8 @@ or right (G42) of the programmed path.
 * **Exit** (G40): the queue is flushed; the next move (a straight one) starts at the
   compensated point and ends at the programmed one.
 
-Moves wait in a queue until the next move tells where they end; the queue is flushed
+The geometry is written for the plane's first and second axis (X, Y; in G18 Z, X) as
+LinuxCNC's is.  Moves wait in a queue until the next move tells where they end; the queue is flushed
 (``dequeue``) as LinuxCNC does.  Angles are compared with LinuxCNC's
 TOLERANCE_CONCAVE_CORNER (0.05 rad).
 """
@@ -69,6 +70,8 @@ class QueuedMove:
     dwell_s: float = 0.0
     line: int = 0
     n: int | None = None
+    axes: tuple[str, str] = ("X", "Y")  # the plane's first and second axis (x, y above)
+    plane: str = "XY"
 
 
 class CompError(Exception):

@@ -103,11 +103,13 @@ class Machine:
         if q.kind == "G4":
             self.blocks.append(Block(line=q.line, n=q.n, motion="G4", target={}, dwell_s=q.dwell_s))
             return
-        target = {"X": q.x, "Y": q.y, **q.rest}
+        a1, a2 = q.axes
+        target = {a1: q.x, a2: q.y, **q.rest}
         self.actual.update(target)
-        centre = {"X": q.cx, "Y": q.cy} if q.kind in ("G2", "G3") else None
+        centre = {a1: q.cx, a2: q.cy} if q.kind in ("G2", "G3") else None
         self.blocks.append(Block(line=q.line, n=q.n, motion=q.kind, target=target, feed=q.feed, center=centre,
-                                 turns=max(1, abs(q.turn)) if centre else 1, blend_tolerance=self.modal.blend))
+                                 plane=q.plane, turns=max(1, abs(q.turn)) if centre else 1,
+                                 blend_tolerance=self.modal.blend))
 
     def finish(self) -> None:
         """Program end: compensated moves still queued are made."""
@@ -279,6 +281,8 @@ class Machine:
         # 11-12 plane and units
         for g, plane in ((17.0, "XY"), (18.0, "XZ"), (19.0, "YZ")):
             if g in gs:
+                if self.comp.side and plane != self.modal.plane:
+                    raise InterpError("cannot change the plane with cutter radius compensation on")
                 self.modal.plane = plane
         if 20.0 in gs:
             self.modal.unit = INCH
@@ -288,16 +292,20 @@ class Machine:
         if 40.0 in gs:
             self._comp_off()
         if 41.0 in gs or 42.0 in gs:
-            if self.modal.plane != "XY":
-                raise InterpError("cutter radius compensation outside the XY plane (G17) is not supported")
+            if self.modal.plane not in ("XY", "XZ"):
+                raise InterpError("cutter radius compensation in the YZ plane (G19): LinuxCNC allows only G17 and G18")
             d = vals.get("d")
             used.add("d")
             if d is not None and (d != int(d) or d < 0):
                 raise InterpError(f"D{d:g}: the tool number for G41/G42 must be a whole number >= 0")
             tool = self.tool if d is None else int(d)
             radius = self._tool(tool).diameter / 2 if tool else 0.0
+            if tool and self._tool(tool).orientation not in (0, 9) and radius:
+                raise InterpError(f"cutter compensation with lathe tool {tool} (orientation "
+                                  f"{self._tool(tool).orientation}) is not supported")
+            a1, a2, n = PLANES[self.modal.plane][:3]
             try:
-                self.comp.start(LEFT if 41.0 in gs else RIGHT, radius, (self.pos["X"], self.pos["Y"], self.pos["Z"]))
+                self.comp.start(LEFT if 41.0 in gs else RIGHT, radius, (self.pos[a1], self.pos[a2], self.pos[n]))
             except CompError as exc:
                 raise InterpError(str(exc)) from None
         # 14 tool length offset
@@ -390,13 +398,14 @@ class Machine:
 
     def _comp_off(self) -> None:
         """G40: flush the queue; the programmed point becomes the current one (LinuxCNC)."""
+        a1, a2, n = PLANES[self.modal.plane][:3]
         try:
-            jumped = self.comp.stop((self.pos["X"], self.pos["Y"]))
+            jumped = self.comp.stop((self.pos[a1], self.pos[a2]))
         except CompError as exc:
             raise InterpError(str(exc)) from None
         if jumped:
             px, py, pz = self.comp.program
-            for a, v in (("X", px), ("Y", py), ("Z", pz)):
+            for a, v in ((a1, px), (a2, py), (n, pz)):
                 if v != self.pos[a]:
                     self.force_axes.add(a)
                 self.pos[a] = v
@@ -482,24 +491,26 @@ class Machine:
 
     def _comp_motion(self, motion: str, vals: dict[str, float], axis_words: dict[str, float],
                      polar: dict[str, float]) -> set[str]:
-        """A G0/G1/G2/G3 under cutter radius compensation (see :mod:`cutter_comp`)."""
+        """A G0/G1/G2/G3 under cutter radius compensation (see :mod:`cutter_comp`); the
+        geometry runs in the plane's (first, second, normal) axes."""
+        plane = self.modal.plane
+        a1, a2, n, l1, l2 = PLANES[plane]
         base = dict(self.pos)
         if not self.comp.firstmove:  # LinuxCNC: relative to the programmed, not the tool, point
-            base["X"], base["Y"], base["Z"] = self.comp.program
+            base[a1], base[a2], base[n] = self.comp.program
         target = self._target(axis_words, polar, False, base)
-        p = (target.get("X", base["X"]), target.get("Y", base["Y"]), target.get("Z", base["Z"]))
-        rest = {a: v for a, v in target.items() if a not in ("X", "Y", "Z")}
-        programmed_len = math.dist(p, (base["X"], base["Y"], base["Z"]))
-        feed = self.feed_mm_s(motion if motion != "G0" else "G0", programmed_len)
-        cur = (self.pos["X"], self.pos["Y"], self.pos["Z"])
+        p = (target.get(a1, base[a1]), target.get(a2, base[a2]), target.get(n, base[n]))
+        rest = {a: v for a, v in target.items() if a not in (a1, a2, n)}
+        feed = self.feed_mm_s(motion, math.dist(p, (base[a1], base[a2], base[n])))
+        cur = (self.pos[a1], self.pos[a2], self.pos[n])
 
         def make(kind: str, x: float, y: float, z: float, dx: float, dy: float, centre=None, turn: int = 0,  # noqa: ANN001
                  original: float = 0.0) -> QueuedMove:
             extra = dict(rest)
-            if z != cur[2] or "Z" in target:
-                extra["Z"] = z
+            if z != cur[2] or n in target:
+                extra[n] = z
             return QueuedMove(kind, x, y, extra, dx, dy, *(centre or (0.0, 0.0)), turn, original,
-                              None if kind == "G0" else feed, line=self.line, n=self.n)
+                              None if kind == "G0" else feed, line=self.line, n=self.n, axes=(a1, a2), plane=plane)
 
         try:
             if motion in ("G0", "G1"):
@@ -507,12 +518,12 @@ class Machine:
                 used: set[str] = set()
             else:
                 turns = int(vals.get("p", 1))
-                centre_of = lambda sx, sy: self._arc_centre(motion, vals, "i", "j", "X", "Y", (sx, sy), p[:2])  # noqa: E731
+                centre_of = lambda sx, sy: self._arc_centre(motion, vals, l1, l2, a1, a2, (sx, sy), p[:2])  # noqa: E731
                 new = self.comp.arc(motion, cur, p, centre_of, turns, make)
-                used = {"i", "j", "r", "p"}
+                used = {l1, l2, "r", "p"}
         except CompError as exc:
             raise InterpError(str(exc)) from None
-        self.pos["X"], self.pos["Y"], self.pos["Z"] = new
+        self.pos[a1], self.pos[a2], self.pos[n] = new
         self.pos.update(rest)
         return used
 

@@ -2,8 +2,8 @@
 
 The offsets (``X Y Z A B C U V W``) and the diameter ``D`` are read in the file's unit,
 given as mm per unit (1 for a table in mm, 25.4 for one in inches — rs274 run without an
-INI file reads its table in inches).  ``I J Q`` (lathe angles and orientation) and ``P``
-(pocket) are read and ignored.
+INI file reads its table in inches).  ``Q`` is the lathe tool orientation; ``I J``
+(lathe angles) and ``P`` (pocket) are read and ignored.
 """
 
 from __future__ import annotations
@@ -21,11 +21,12 @@ _WORD = re.compile(r"([A-Za-z])\s*([+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)")
 
 @dataclass(frozen=True)
 class Tool:
-    """One tool: its number, offsets per axis (mm) and diameter (mm)."""
+    """One tool: its number, offsets per axis (mm), diameter (mm) and lathe orientation Q."""
 
     number: int
     offsets: dict[str, float] = field(default_factory=dict)
     diameter: float = 0.0
+    orientation: int = 0
 
 
 def parse_tool_table(text: str, *, unit_mm: float = 1.0, source: str = "tool table") -> dict[int, Tool]:
@@ -53,7 +54,7 @@ def parse_tool_table(text: str, *, unit_mm: float = 1.0, source: str = "tool tab
         for a in "ABC":  # rotary offsets are degrees, not scaled
             if a in words:
                 offsets[a] = words[a]
-        tools[t] = Tool(t, offsets, words.get("D", 0.0) * unit_mm)
+        tools[t] = Tool(t, offsets, words.get("D", 0.0) * unit_mm, int(words.get("Q", 0)))
     return tools
 
 
