@@ -432,3 +432,22 @@ def test_iso_program_numbers_and_cycle_dwell_in_milliseconds():
 def test_numbers_out_of_range_are_errors_with_a_line(text, message):
     with pytest.raises(ProgramError, match=rf"^p:1: .*{message}"):
         interpret(text, name="p")
+
+
+@needs_rs274
+def test_a_series_of_different_cycles_keeps_its_initial_level(tmp_path):
+    path = tmp_path / "cycles.ngc"
+    path.write_text("G21 G0 X0 Y0 Z10\nG98 G81 X5 R2 Z-3 F60\nG0 Z20\nG82 X6 R2 Z-3 P1\nG83 X7 Z-3 R2 Q1\n"
+                    "G91 G85 X1 R-15 Z-5 L2\nG90 G89 X20 R2 Z-1 P0.5\nM2\n")
+    agreement = _agree(path)
+    assert agreement.problem is None and agreement.n_moves > 25
+
+
+@needs_rs274
+def test_cycles_from_below_r_incremental_repeats_and_polar_agree_with_rs274(tmp_path):
+    path = tmp_path / "cycles2.ngc"
+    path.write_text("G21 S1000 M3 G0 X0 Y0 Z10\nG98 G73 X5 R2 Z-3 Q1.2 F60\nG86 X6 R2 Z-3 P0.2\nG99 X8\n"
+                    "G91 G82 X2 Y1 R-5 Z-3 P0.1 L3\nG90 G80\nG0 X10 Y0\nG91 G81 ^30 R1 Z-2 L4\n"
+                    "G90 G81 @5 ^10 R1 Z-2\nM2\n")
+    agreement = _agree(path)
+    assert agreement.problem is None and agreement.n_moves > 40

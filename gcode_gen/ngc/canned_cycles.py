@@ -9,10 +9,10 @@ in program coordinates of the active system:
 * if the current Z is below R, first a rapid up to R;
 * the retract height is R (G99) or the initial level (G98: the Z where the series of cycle
   blocks began, or R when that is higher); G91 R is relative to the initial level;
-* each of the L repeats: rapid in XY at the current height, rapid down to R (if not there),
-  then the cycle: G81 feed to Z, rapid out; G82 the same with a dwell P at the bottom;
+* each of the L repeats: rapid in XY — the first from above R at the current height, the
+  others at the retract height — and down to R, then the cycle: G81 feed to Z, rapid out; G82 the same with a dwell P at the bottom;
   G73 pecks of Q with a rapid back-off of 0.010 in (0.254 mm); G83 pecks of Q, rapid out to
-  R and back down to 0.010 in above the last depth; G85 feed in, feed out;
+  R and back down to 0.010 in above the last depth; G85 feed in, feed out to R, rapid to the retract height;
   G86 feed in, dwell P, rapid out (spindle stopped); G89 feed in, dwell P, feed out.
 
 G84 (tapping), G87 (back boring) and G88 (manual retract) need the spindle or the
@@ -44,13 +44,15 @@ class CycleMove:
 
 @dataclass
 class CycleState:
-    """The sticky cycle words (program units / s): R, Z, P, Q."""
+    """The sticky cycle words (program units / s): R, Z, P, Q; the initial level and the
+    cycle of the current series (None when the last motion mode was not a cycle)."""
 
     r: float | None = None
     z: float | None = None
     p: float | None = None
     q: float | None = None
     initial: float | None = None
+    series: str | None = None
 
 
 def expand_cycle(motion: str, first: bool, words: dict[str, float], state: CycleState, current: tuple[float, float, float],
@@ -62,7 +64,7 @@ def expand_cycle(motion: str, first: bool, words: dict[str, float], state: Cycle
     (``state.initial``, the G98 retract height and the G91 base of R) is the Z where the
     series of cycle blocks started (LinuxCNC's ``cycle_il``).
     """
-    if first or state.initial is None:
+    if state.series is None:  # a new series: its initial level is here
         state.initial = current[2]
     x0, y0, z0 = current
     if first and "z" not in words:
@@ -108,18 +110,20 @@ def expand_cycle(motion: str, first: bool, words: dict[str, float], state: Cycle
     clear_cc = old_cc if g98 else r
     delta = G83_RAPID_DELTA_IN * (1.0 if inch else 25.4)
     dr, dtheta = words.get("@", 0.0), math.radians(words.get("^", 0.0))
-    for _ in range(int(repeats)):
+    for k in range(int(repeats)):
         aa, bb = aa + da, bb + db
         if dr or dtheta:
             if aa == 0 and bb == 0:
                 raise error("incremental polar motion is undefined at the origin")
             radius, theta = math.hypot(aa, bb) + dr, math.atan2(bb, aa) + dtheta
             aa, bb = radius * math.cos(theta), radius * math.sin(theta)
-        moves.append(CycleMove("G0", aa, bb, current_cc))
-        if old_cc != r:
-            moves.append(CycleMove("G0", aa, bb, r))
+        if k == 0 and current_cc > r:  # from above R: across at the current height, down to R
+            moves += [CycleMove("G0", aa, bb, current_cc), CycleMove("G0", aa, bb, r)]
+        else:  # otherwise across at the retract height (then down to R)
+            moves.append(CycleMove("G0", aa, bb, clear_cc))
+            if clear_cc > r:
+                moves.append(CycleMove("G0", aa, bb, r))
         moves.extend(_cycle_body(motion, aa, bb, r, clear_cc, cc, state, delta))
-        current_cc = clear_cc
     return moves, (aa, bb, clear_cc)
 
 
@@ -142,7 +146,7 @@ def _cycle_body(motion: str, x: float, y: float, r: float, clear: float, bottom:
             depth -= state.q
         return out + [feed(bottom), rapid(clear)]
     if motion == "G85":
-        return [feed(bottom), feed(clear)]
+        return [feed(bottom), feed(r), rapid(clear)]
     if motion == "G86":
         return [feed(bottom), CycleMove("G4", dwell_s=state.p), rapid(clear)]
     if motion == "G89":

@@ -384,9 +384,9 @@ class Machine:
                 if has_motion_words:
                     raise InterpError("axis words without a motion mode (G0/G1/G2/G3 or a canned cycle)")
             else:
-                used |= self._motion(motion, vals, axis_words, polar, 53.0 in gs, bool(motions))
-        if 80.0 in gs or (motions and motions[0] not in (73.0, 81.0, 82.0, 83.0, 85.0, 86.0, 89.0)):
-            self._cycle_first = True
+                used |= self._motion(motion, vals, axis_words, polar, 53.0 in gs)
+        if motions and _MOTION[motions[0]] not in SUPPORTED_CYCLES:
+            self.cycle.series = None  # any other motion mode (or G80) ends a series of cycles
         used |= {k for k in vals if k.upper() in AXES} | set(polar)
         for letter in vals:
             if letter not in used:
@@ -470,7 +470,7 @@ class Machine:
         self.emit("G0", target)
 
     def _motion(self, motion: str, vals: dict[str, float], axis_words: dict[str, float], polar: dict[str, float],
-                g53: bool, explicit: bool) -> set[str]:
+                g53: bool) -> set[str]:
         if motion in SUPPORTED_CYCLES:
             self._refuse_with_comp(f"{motion} canned cycle")
             return self._cycle(motion, vals, axis_words, polar)
@@ -613,7 +613,7 @@ class Machine:
             raise InterpError(f"{motion} canned cycle outside the XY plane (G17) is not supported")
         if set(axis_words) - {"X", "Y", "Z"}:
             raise InterpError(f"{motion} canned cycle with axis {sorted(set(axis_words) - {'X', 'Y', 'Z'})[0]}")
-        first = getattr(self, "_cycle_first", True) or self._cycle_motion != motion
+        first = self.cycle.series != motion
         words = {a.lower(): v for a, v in axis_words.items()}
         words.update({k: vals[k] for k in "rlpq" if k in vals})
         if self.dialect == "iso" and "p" in words:
@@ -635,12 +635,8 @@ class Machine:
             target = {"X": self.machine("X", mv.x), "Y": self.machine("Y", mv.y), "Z": self.machine("Z", mv.z)}
             self.emit(mv.kind, {a: v for a, v in target.items() if abs(v - self.pos[a]) > 0 or a == "Z"})
         self.modal.blend = blend
-        self._cycle_first = False
-        self._cycle_motion = motion
+        self.cycle.series = motion
         return {"r", "l", "p", "q"}
-
-    _cycle_first: bool = True
-    _cycle_motion: str = ""
 
 
 def center_from_radius(x0: float, y0: float, x1: float, y1: float, r: float, clockwise: bool) -> tuple[float, float]:
