@@ -451,3 +451,22 @@ def test_cycles_from_below_r_incremental_repeats_and_polar_agree_with_rs274(tmp_
                     "G90 G81 @5 ^10 R1 Z-2\nM2\n")
     agreement = _agree(path)
     assert agreement.problem is None and agreement.n_moves > 40
+
+
+def test_changing_units_with_a_tool_length_offset_active_is_refused():
+    tools = parse_tool_table("T1 P1 Z10\n")
+    with pytest.raises(ProgramError, match=r"^p:3: G20 changes the units with a tool length offset active"):
+        interpret("G21\nG43 H1\nG20\n", tools=tools, name="p")
+    blocks, _ = interpret("G21\nG43 H1\nG49\nG20\nG0 X1\nG21\n", tools=tools)  # cancelled first: fine
+    assert blocks[0].target == {"X": pytest.approx(25.4)}
+
+
+@needs_rs274
+def test_random_programs_agree_with_rs274():
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, str(ROOT / "scripts" / "fuzz_rs274.py"), "--seed", "11", "--count", "40"],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    assert "disagree 0" in res.stdout

@@ -38,6 +38,13 @@ _MOTION = {0.0: "G0", 1.0: "G1", 2.0: "G2", 3.0: "G3", 73.0: "G73", 80.0: "G80",
 _NO_EFFECT_G = {40.0, 94.0, 97.0, 96.0}
 #: M-codes without motion: stops, spindle, coolant, overrides, digital/analog I/O.
 _NO_MOTION_M = {0, 1, 3, 4, 5, 7, 8, 9, 48, 49, 50, 51, 52, 53, 60, 62, 63, 64, 65}
+#: LinuxCNC's modal groups (one code of each per block); motion and non-modal are checked apart.
+_MODAL_GROUPS = (
+    {17.0, 18.0, 19.0, 17.1, 18.1, 19.1}, {90.0, 91.0}, {90.1, 91.1}, {93.0, 94.0, 95.0}, {20.0, 21.0},
+    {40.0, 41.0, 42.0, 41.1, 42.1}, {43.0, 43.1, 43.2, 49.0}, {98.0, 99.0}, set(_COORD_SYSTEMS),
+    {61.0, 61.1, 64.0}, {96.0, 97.0}, {7.0, 8.0},
+)
+_M_GROUPS = ({0, 1, 2, 30, 60}, {6, 61}, {3, 4, 5}, {7, 8, 9}, {48, 49, 50, 51, 52, 53}, {70, 71, 72, 73})
 _REFUSED_G = {
     5.0: "cubic spline G5", 5.1: "quadratic B-spline G5.1", 5.2: "NURBS G5.2", 5.3: "NURBS G5.3",
     7.0: "lathe diameter mode G7", 8.0: "lathe radius mode G8", 33.0: "spindle-synchronised motion G33",
@@ -207,6 +214,14 @@ class Machine:
             if m not in _NO_MOTION_M and m not in (2, 30, 6, 61, 70, 71, 72, 73, 66, 67, 68, 19):
                 raise InterpError(f"unknown or unsupported M-code M{m}")
 
+        for group in _MODAL_GROUPS:
+            same = [g for g in gs if g in group]
+            if len(same) > 1:
+                raise InterpError(f"two G-codes of one modal group in a block: G{same[0]:g} and G{same[1]:g}")
+        for group in _M_GROUPS:
+            same = [m for m in ms if m in group]
+            if len(same) > 1 and set(same) != {7, 8}:
+                raise InterpError(f"two M-codes of one modal group in a block: M{same[0]} and M{same[1]}")
         motions = [g for g in gs if g in _MOTION]
         non_modal = [g for g in gs if g in (4.0, 10.0, 28.0, 28.1, 30.0, 30.1, 53.0, 92.0, 92.1, 92.2, 92.3)]
         if len(motions) > 1:
@@ -284,10 +299,13 @@ class Machine:
                 if self.comp.side and plane != self.modal.plane:
                     raise InterpError("cannot change the plane with cutter radius compensation on")
                 self.modal.plane = plane
-        if 20.0 in gs:
-            self.modal.unit = INCH
-        if 21.0 in gs:
-            self.modal.unit = 1.0
+        new_unit = INCH if 20.0 in gs else 1.0 if 21.0 in gs else self.modal.unit
+        if new_unit != self.modal.unit and any(self.tlo.values()):
+            # LinuxCNC keeps the active offset's number through a change of units, so G53,
+            # G28/G30 and the next G43/G49 would be off by the unconverted offset: refuse.
+            raise InterpError(f"G{20 if new_unit == INCH else 21} changes the units with a tool length offset "
+                              "active (LinuxCNC does not convert it); cancel it with G49 first")
+        self.modal.unit = new_unit
         # 13 cutter radius compensation
         if 40.0 in gs:
             self._comp_off()
@@ -602,9 +620,13 @@ class Machine:
         else:
             cx, cy = x0 + vals.get(l1, 0.0) * u, y0 + vals.get(l2, 0.0) * u
         r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
-        if r0 < 1e-9:
+        if min(r0, r1) < 1e-9:
             raise InterpError("arc radius is zero")
-        if abs(r0 - r1) > max(0.002, 1e-3 * r0):
+        # LinuxCNC's spiral tolerance: at most 100 x, or 0.1 % and more than 1 x, 2·0.01·√2 mm
+        # (2·0.001·√2 in in G20) between start and end radius
+        tol = 2 * (0.001 * INCH if u == INCH else 0.01) * math.sqrt(2.0)
+        err = abs(r0 - r1)
+        if err > 100 * tol or (err / max(r0, r1) > 0.001 and err > tol):
             raise InterpError(f"arc end radius {r1:.4f} mm differs from start radius {r0:.4f} mm")
         return cx, cy
 
