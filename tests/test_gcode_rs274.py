@@ -470,3 +470,37 @@ def test_random_programs_agree_with_rs274():
                          capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     assert "disagree 0" in res.stdout
+
+
+# ---- the language against rs274 ---------------------------------------------------------
+
+EXPRESSIONS = ['[-7 MOD 3]', '[7 MOD -3]', '[-7 MOD -3]', '[7.5 MOD 2]', '[ROUND[-2.5]]', '[ROUND[2.5]]', '[FIX[-2.5]]', '[FUP[-2.5]]', '[ATAN[-1]/[-1]]', '[ATAN[0]/[-1]]', '[2 ** 3 ** 2]', '[-2 ** 2]', '[0 - 2 ** 2]', '[1 EQ 1.00001]', '[1 NE 1.00001]', '[1 EQ 1.001]', '[3 - 2 - 1]', '[8 / 2 / 2]', '[1 + 2 * 3 ** 2]', '[1 OR 0 AND 0]', '[2 XOR 3]', '[ACOS[0.5]]', '[ASIN[0.5]]', '[TAN[45]]', '[EXP[1]]', '[LN[10]]', '[--3]', '[3 * -2]', '[10 MOD 0.3]', '[EXISTS[#<foo>]]', '[1 EQ 1 EQ 1]', '[5 - -3]']
+
+
+def test_mod_is_non_negative_and_eq_has_linuxcnc_tolerance():
+    ends = _ends("G21\nG0 X[7 MOD -3] Y[-7 MOD -3] Z[-7 MOD 3]\nG0 X[1 EQ 1.00001] Y[1 NE 1.00001] Z[1 EQ 1.001]\n")
+    assert ends[0] == {"X": 1.0, "Y": 2.0, "Z": 2.0}
+    assert ends[1] == {"X": 1.0, "Y": 0.0, "Z": 0.0}
+
+
+@needs_rs274
+def test_expressions_evaluate_as_in_rs274(tmp_path):
+    path = tmp_path / "expr.ngc"
+    text = "G21\n" + "\n".join(f"G0 X{e}" for e in EXPRESSIONS) + "\nM2\n"
+    path.write_text(text)
+    ref = run_rs274(path)
+    blocks, _ = interpret(text)
+    assert ref.returncode == 0 and len(ref.moves) == len(blocks) == len(EXPRESSIONS)
+    for expr, ours, theirs in zip(EXPRESSIONS, blocks, ref.moves):
+        assert ours.target["X"] == pytest.approx(theirs.end["X"], abs=1e-4), expr
+
+
+FLOW = 'G21 G90 F600\n#<_g> = 0\no<inner> sub\n  #<loc> = [#1 * 2]\n  #<_g> = [#<_g> + 1]\n  G1 X#<loc> Y#<_g>\n  o<inner> return [#<loc> + 1]\no<inner> endsub\no<outer> sub\n  #2 = 0\n  o11 while [#2 LT #1]\n    o<inner> call [#2]\n    G1 Z#<_value>\n    o12 if [#2 EQ 1]\n      #2 = [#2 + 2]\n      o11 continue\n    o12 endif\n    #2 = [#2 + 1]\n  o11 endwhile\n  o14 repeat [2]\n    o15 repeat [2]\n      G1 X[#<_g> * 3] Y#1\n      #<_g> = [#<_g> + 0.5]\n    o15 endrepeat\n  o14 endrepeat\no<outer> endsub\n#1 = 42\no<outer> call [7]\nG0 X#1 Y#<_g>\no20 do\n  #1 = [#1 - 10]\n  G1 X#1\no20 while [#1 GT 10]\no30 sub\n  M73\n  G20 G91\n  G1 X1\no30 endsub\no30 call\nG1 X5 Y5\nM2\n'
+
+
+@needs_rs274
+def test_subroutines_loops_return_values_and_m73_agree_with_rs274(tmp_path):
+    path = tmp_path / "flow.ngc"
+    path.write_text(FLOW)
+    agreement = _agree(path)
+    assert agreement.problem is None and agreement.n_moves > 20

@@ -10,8 +10,8 @@ A value is parsed once into a small tree of tuples and evaluated each time its l
   (angles in degrees), ``ATAN[y]/[x]`` (two arguments, degrees), ``EXISTS[#<name>]``;
 * ``#n``, ``#[expr]``, ``##n`` numbered parameters, ``#<name>`` named parameters.
 
-Comparisons give 1.0 or 0.0; ``EQ``/``NE`` compare within 1e-6 as LinuxCNC's
-``TOLERANCE_EQUAL``.
+Comparisons give 1.0 or 0.0; ``EQ``/``NE`` compare within 1e-4 (LinuxCNC's
+``TOLERANCE_EQUAL``); ``a MOD b`` is fmod(a, b) made non-negative by adding |b|, as LinuxCNC.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ __all__ = ["Expr", "ExprError", "parse_value", "evaluate"]
 #: ("bin", op, Expr, Expr) | ("fn", name, Expr) | ("atan", Expr, Expr) | ("exists", name)
 Expr = tuple
 
-TOLERANCE_EQUAL = 1e-6
+TOLERANCE_EQUAL = 1e-4  # LinuxCNC's TOLERANCE_EQUAL
 
 
 class ExprError(ValueError):
@@ -199,7 +199,8 @@ def _binary(op: str, a: float, b: float) -> float:
     if op == "mod":
         if b == 0:
             raise ExprError("MOD by zero")
-        return math.fmod(a, b) if math.fmod(a, b) * b >= 0 else math.fmod(a, b) + b
+        r = math.fmod(a, b)
+        return r + abs(b) if r < 0 else r
     if op == "**":
         if a < 0 and b != math.floor(b):
             raise ExprError(f"{a:g} ** {b:g}: negative base with a fractional exponent")
