@@ -29,7 +29,7 @@ from pathlib import Path
 
 from core.errors import InputError, ProgramError
 from gcode_gen.ngc import Tool, interpret, read_tool_table
-from gcode_gen.ngc.machine import InterpError, center_from_radius
+from gcode_gen.ngc.arcs import ArcError, center_from_radius
 from gcode_gen.program import AXIS_LETTERS, Block, Program
 
 __all__ = ["parse_program", "read_program", "detect_dialect", "DIALECT_NAMES"]
@@ -188,7 +188,7 @@ class _Reader:
         if radius is not None:
             try:
                 center = center_from_radius(x0, y0, x1, y1, radius, motion == "G2")
-            except InterpError as exc:
+            except ArcError as exc:
                 raise self.error(str(exc)) from None
         assert center is not None
         cx, cy = center

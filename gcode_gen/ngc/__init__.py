@@ -6,7 +6,9 @@ The interpreter is split by job:
 * :mod:`~gcode_gen.ngc.expressions` — values, ``[ ]`` expressions and functions;
 * :mod:`~gcode_gen.ngc.parameters` — numbered and named parameters and their scopes;
 * :mod:`~gcode_gen.ngc.subroutines` — O-word subroutines, conditionals and loops;
+* :mod:`~gcode_gen.ngc.codes` — a block's G/M codes: known, refused, modal groups;
 * :mod:`~gcode_gen.ngc.machine` — the modal state, offsets, and the moves of a block;
+* :mod:`~gcode_gen.ngc.arcs` — arc centres, radius tolerance, sweeps;
 * :mod:`~gcode_gen.ngc.canned_cycles` — G73/G81–G89 expanded into moves;
 * :mod:`~gcode_gen.ngc.cutter_comp` — cutter radius compensation G41/G42;
 * :mod:`~gcode_gen.ngc.tool_table` — LinuxCNC tool table files.
@@ -21,6 +23,7 @@ from __future__ import annotations
 import re
 
 from core.errors import ProgramError
+from gcode_gen.ngc.arcs import ArcError
 from gcode_gen.ngc.expressions import Expr, ExprError, evaluate
 from gcode_gen.ngc.lexer import Line, lex_line
 from gcode_gen.ngc.machine import InterpError, Machine
@@ -100,7 +103,7 @@ def interpret(text: str, *, name: str = "program", dialect: str = "linuxcnc",
         machine.finish()
     except ProgramError:
         raise
-    except (InterpError, ExprError) as exc:
+    except (InterpError, ExprError, ArcError) as exc:
         line = getattr(exc, "line", None) or (flow.current + 1 if flow else machine.line)
         raise ProgramError(str(exc), line=line, source=name) from None
     except RecursionError:

@@ -18,45 +18,19 @@ import math
 from dataclasses import dataclass, field, replace
 from typing import Callable
 
+from gcode_gen.ngc.arcs import PLANES, center_from_radius, check_radii, sweep
 from gcode_gen.ngc.canned_cycles import SUPPORTED_CYCLES, CycleState, expand_cycle
+from gcode_gen.ngc.codes import COORD_SYSTEMS, CodeError, split_block
 from gcode_gen.ngc.cutter_comp import LEFT, RIGHT, CompError, CutterComp, QueuedMove
 from gcode_gen.ngc.parameters import COORD_SYSTEM, G5X_BASE, G28_BASE, G30_BASE, G92_BASE, Parameters
 from gcode_gen.ngc.tool_table import Tool
 from gcode_gen.program import Block
 
-__all__ = ["Machine", "AXES", "PLANES", "InterpError", "center_from_radius"]
+__all__ = ["Machine", "AXES", "InterpError"]
 
 AXES = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
 ROTARY = ("A", "B", "C")
 INCH = 25.4
-#: plane -> (first axis, second axis, normal axis, first offset letter, second offset letter)
-PLANES = {"XY": ("X", "Y", "Z", "i", "j"), "XZ": ("Z", "X", "Y", "k", "i"), "YZ": ("Y", "Z", "X", "j", "k")}
-_COORD_SYSTEMS = {54.0: 1, 55.0: 2, 56.0: 3, 57.0: 4, 58.0: 5, 59.0: 6, 59.1: 7, 59.2: 8, 59.3: 9}
-_MOTION = {0.0: "G0", 1.0: "G1", 2.0: "G2", 3.0: "G3", 73.0: "G73", 80.0: "G80", 81.0: "G81", 82.0: "G82",
-           83.0: "G83", 84.0: "G84", 85.0: "G85", 86.0: "G86", 87.0: "G87", 88.0: "G88", 89.0: "G89"}
-#: G-codes that only set a mode this interpreter does not need (or that is its only mode).
-_NO_EFFECT_G = {40.0, 94.0, 97.0, 96.0}
-#: M-codes without motion: stops, spindle, coolant, overrides, digital/analog I/O.
-_NO_MOTION_M = {0, 1, 3, 4, 5, 7, 8, 9, 48, 49, 50, 51, 52, 53, 60, 62, 63, 64, 65}
-#: LinuxCNC's modal groups (one code of each per block); motion and non-modal are checked apart.
-_MODAL_GROUPS = (
-    {17.0, 18.0, 19.0, 17.1, 18.1, 19.1}, {90.0, 91.0}, {90.1, 91.1}, {93.0, 94.0, 95.0}, {20.0, 21.0},
-    {40.0, 41.0, 42.0, 41.1, 42.1}, {43.0, 43.1, 43.2, 49.0}, {98.0, 99.0}, set(_COORD_SYSTEMS),
-    {61.0, 61.1, 64.0}, {96.0, 97.0}, {7.0, 8.0},
-)
-_M_GROUPS = ({0, 1, 2, 30, 60}, {6, 61}, {3, 4, 5}, {7, 8, 9}, {48, 49, 50, 51, 52, 53}, {70, 71, 72, 73})
-_REFUSED_G = {
-    5.0: "cubic spline G5", 5.1: "quadratic B-spline G5.1", 5.2: "NURBS G5.2", 5.3: "NURBS G5.3",
-    7.0: "lathe diameter mode G7", 8.0: "lathe radius mode G8", 33.0: "spindle-synchronised motion G33",
-    33.1: "rigid tapping G33.1", 38.2: "probing G38.2", 38.3: "probing G38.3", 38.4: "probing G38.4",
-    38.5: "probing G38.5", 41.1: "dynamic cutter compensation G41.1", 42.1: "dynamic cutter compensation G42.1",
-    43.2: "additional tool length offset G43.2", 70.0: "lathe finishing cycle G70", 71.0: "lathe roughing cycle G71",
-    72.0: "lathe roughing cycle G72", 74.0: "left-hand tapping G74", 76.0: "lathe threading cycle G76",
-    84.0: "tapping cycle G84", 87.0: "back-boring cycle G87", 88.0: "manual-retract boring cycle G88",
-    95.0: "feed per revolution G95", 52.0: "local offset G52",
-}
-
-
 class InterpError(Exception):
     """A block cannot be executed; the flow adds file and line."""
 
@@ -189,51 +163,11 @@ class Machine:
     # ---- one block ----------------------------------------------------------------------
     def execute(self, words: list[tuple[str, float]], on_end: Callable[[], None]) -> None:
         """Execute one block of evaluated words (letters lower case)."""
-        gs: list[float] = []
-        ms: list[int] = []
-        vals: dict[str, float] = {}
-        for letter, value in words:
-            if letter == "g":
-                gs.append(round(value, 1))
-            elif letter == "m":
-                if value != int(value):
-                    raise InterpError(f"M{value:g}: M-codes are whole numbers")
-                ms.append(int(value))
-            else:
-                if letter in vals:
-                    raise InterpError(f"word {letter.upper()} appears twice in one block")
-                vals[letter] = value
-        for g in gs:
-            if g in _REFUSED_G:
-                raise InterpError(f"{_REFUSED_G[g]} is not supported")
-        for m in ms:
-            if 100 <= m <= 199:
-                raise InterpError(f"user-defined M-code M{m} is not supported (it runs an external program)")
-            if m in (98, 99):
-                raise InterpError(f"Fanuc subprogram call M{m} is not supported (use O-word subroutines)")
-            if m not in _NO_MOTION_M and m not in (2, 30, 6, 61, 70, 71, 72, 73, 66, 67, 68, 19):
-                raise InterpError(f"unknown or unsupported M-code M{m}")
-
-        for group in _MODAL_GROUPS:
-            same = [g for g in gs if g in group]
-            if len(same) > 1:
-                raise InterpError(f"two G-codes of one modal group in a block: G{same[0]:g} and G{same[1]:g}")
-        for group in _M_GROUPS:
-            same = [m for m in ms if m in group]
-            if len(same) > 1 and set(same) != {7, 8}:
-                raise InterpError(f"two M-codes of one modal group in a block: M{same[0]} and M{same[1]}")
-        motions = [g for g in gs if g in _MOTION]
-        non_modal = [g for g in gs if g in (4.0, 10.0, 28.0, 28.1, 30.0, 30.1, 53.0, 92.0, 92.1, 92.2, 92.3)]
-        if len(motions) > 1:
-            raise InterpError("two motion G-codes in one block")
-        if len([g for g in non_modal if g != 53.0]) > 1:
-            raise InterpError("two non-modal G-codes (G4, G10, G28, G30, G92…) in one block")
-        known = set(_MOTION) | set(non_modal) | _NO_EFFECT_G | set(_COORD_SYSTEMS) | {
-            17.0, 18.0, 19.0, 20.0, 21.0, 41.0, 42.0, 43.0, 43.1, 49.0, 61.0, 61.1, 64.0, 90.0, 91.0, 90.1, 91.1,
-            93.0, 98.0, 99.0}
-        for g in gs:
-            if g not in known:
-                raise InterpError(f"unknown or unsupported G-code G{g:g}")
+        try:
+            codes = split_block(words)
+        except CodeError as exc:
+            raise InterpError(str(exc)) from None
+        gs, ms, vals = codes.gs, codes.ms, codes.vals
         used: set[str] = {"n"}
         if self.modal.inverse_time and "f" not in vals:
             self.modal.feed = None  # G93: every feed block carries its own F
@@ -341,7 +275,7 @@ class Machine:
         if 49.0 in gs:
             self.tlo = {a: 0.0 for a in AXES}
         # 15 coordinate system
-        for g, index in _COORD_SYSTEMS.items():
+        for g, index in COORD_SYSTEMS.items():
             if g in gs:
                 self.modal.coord = index
                 self._mirror_offsets()
@@ -393,17 +327,17 @@ class Machine:
             self.g92 = {a: self.params.get(G92_BASE + k) for k, a in enumerate(AXES)}
 
         # 20 motion
-        if motions:
-            self.modal.motion = _MOTION[motions[0]]
+        if codes.motion:
+            self.modal.motion = codes.motion
         has_motion_words = bool(axis_words or polar)
-        if not motion_done and (motions or has_motion_words):
+        if not motion_done and (codes.motion or has_motion_words):
             motion = self.modal.motion
             if motion is None or motion == "G80":
                 if has_motion_words:
                     raise InterpError("axis words without a motion mode (G0/G1/G2/G3 or a canned cycle)")
             else:
                 used |= self._motion(motion, vals, axis_words, polar, 53.0 in gs)
-        if motions and _MOTION[motions[0]] not in SUPPORTED_CYCLES:
+        if codes.motion and codes.motion not in SUPPORTED_CYCLES:
             self.cycle.series = None  # any other motion mode (or G80) ends a series of cycles
         used |= {k for k in vals if k.upper() in AXES} | set(polar)
         for letter in vals:
@@ -593,13 +527,7 @@ class Machine:
         r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
         full = {a1: x1, a2: y1}
         full.update({a: v for a, v in target.items() if a not in full})
-        th0, th1 = math.atan2(y0 - cy, x0 - cx), math.atan2(y1 - cy, x1 - cx)
-        if motion == "G3":
-            sweep = (th1 - th0) % (2 * math.pi) or 2 * math.pi
-        else:
-            sweep = (th0 - th1) % (2 * math.pi) or 2 * math.pi
-        sweep += 2 * math.pi * (turns - 1)
-        planar = 0.5 * (r0 + r1) * sweep
+        planar = 0.5 * (r0 + r1) * sweep((x0, y0), (x1, y1), (cx, cy), motion == "G3", turns)
         axial = math.sqrt(sum((full[a] - self.pos[a]) ** 2 for a in full if a not in (a1, a2) and a not in ROTARY))
         self.emit(motion, full, center={a1: cx, a2: cy}, plane=plane, turns=turns, length_mm=math.hypot(planar, axial))
         return {l1, l2, "r", "p"}
@@ -619,15 +547,7 @@ class Machine:
             cx, cy = self.machine(a1, vals.get(l1, 0.0)), self.machine(a2, vals.get(l2, 0.0))
         else:
             cx, cy = x0 + vals.get(l1, 0.0) * u, y0 + vals.get(l2, 0.0) * u
-        r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
-        if min(r0, r1) < 1e-9:
-            raise InterpError("arc radius is zero")
-        # LinuxCNC's spiral tolerance: at most 100 x, or 0.1 % and more than 1 x, 2·0.01·√2 mm
-        # (2·0.001·√2 in in G20) between start and end radius
-        tol = 2 * (0.001 * INCH if u == INCH else 0.01) * math.sqrt(2.0)
-        err = abs(r0 - r1)
-        if err > 100 * tol or (err / max(r0, r1) > 0.001 and err > tol):
-            raise InterpError(f"arc end radius {r1:.4f} mm differs from start radius {r0:.4f} mm")
+        check_radii(math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy), u == INCH)
         return cx, cy
 
     def _cycle(self, motion: str, vals: dict[str, float], axis_words: dict[str, float], polar: dict[str, float]) -> set[str]:
@@ -659,19 +579,3 @@ class Machine:
         self.modal.blend = blend
         self.cycle.series = motion
         return {"r", "l", "p", "q"}
-
-
-def center_from_radius(x0: float, y0: float, x1: float, y1: float, r: float, clockwise: bool) -> tuple[float, float]:
-    """Arc centre from the chord and radius; r < 0 selects the arc longer than 180°."""
-    dx, dy = x1 - x0, y1 - y0
-    chord = math.hypot(dx, dy)
-    if chord < 1e-9:
-        raise InterpError("radius-format arc cannot be a full circle (use I/J/K)")
-    if abs(r) < chord / 2 - 1e-6:
-        raise InterpError(f"arc radius {abs(r):.4f} mm is shorter than half the chord {chord / 2:.4f} mm")
-    h = math.sqrt(max(r * r - chord * chord / 4, 0.0))
-    nx, ny = -dy / chord, dx / chord  # left normal of the chord
-    side = -1.0 if clockwise else 1.0
-    if r < 0:
-        side = -side
-    return (x0 + dx / 2 + side * h * nx, y0 + dy / 2 + side * h * ny)
