@@ -8,7 +8,8 @@ Each program mixes what part programs do — rapids and feeds in any axes, arcs 
 (I/J/K and R, helices, full circles with P turns), G20/G21, G91 moves, work offsets G10 L2 and
 G54–G56, G92 family, tool changes and G43/G49, G28, G53, canned cycles G73/G81–G83/G85/G89 with
 G98/G99, G91 and L, dwells — and is compared move by move (gcode_gen.ngc.rs274_canon.compare).
-Prints each disagreement and each program only one interpreter refuses, then the totals; exit
+With ``--kind comp`` the programs are random contours of lines and arcs under G41/G42 (many
+gouge; then both must refuse).  Prints each disagreement and each program only one interpreter refuses, then the totals; exit
 code 1 when any program disagrees.  Our deliberate refusal (G20/G21 with a tool length
 offset active, which LinuxCNC mishandles) is counted apart.
 """
@@ -16,6 +17,7 @@ offset active, which LinuxCNC mishandles) is counted apart.
 from __future__ import annotations
 
 import argparse
+import math
 import random
 import sys
 import tempfile
@@ -81,10 +83,35 @@ def random_program(rng: random.Random) -> str:
     return "G21 G17 G90 F300 S1000 M3\n" + "\n".join(random_block(rng) for _ in range(rng.randint(3, 15))) + "\nM2\n"
 
 
+def random_comp_program(rng: random.Random) -> str:
+    """A random contour of lines, R arcs and I/J arcs under G41/G42 with tool 1 (3.175 mm)."""
+    lines = ["G21 G17 G90 F500 S1000 M3", "T1 M6", "G0 X-40 Y-40 Z5",
+             rng.choice(["G41", "G42"]) + (" D1" if rng.random() < 0.5 else "")]
+    x, y = -40.0, -40.0
+    for k in range(rng.randint(2, 8)):
+        kind = rng.random()
+        nx, ny = rng.uniform(-30, 30), rng.uniform(-30, 30)
+        if k == 0 or kind < 0.5 or math.hypot(nx - x, ny - y) < 1:
+            lines.append(f"G1 X{nx:.3f} Y{ny:.3f}" + (f" Z{rng.uniform(-2, 0):.3f}" if rng.random() < 0.2 else ""))
+        elif kind < 0.75:
+            chord = math.hypot(nx - x, ny - y)
+            r = rng.choice([1, -1]) * rng.uniform(chord / 2 + 0.5, chord * 2)
+            lines.append(f"{rng.choice(['G2', 'G3'])} X{nx:.3f} Y{ny:.3f} R{r:.3f}")
+        else:  # I/J arc: a centre, the end on its circle
+            cx, cy = x + rng.uniform(-15, 15), y + rng.uniform(-15, 15)
+            radius, a = math.hypot(x - cx, y - cy), rng.uniform(0, 2 * math.pi)
+            nx, ny = cx + radius * math.cos(a), cy + radius * math.sin(a)
+            lines.append(f"{rng.choice(['G2', 'G3'])} X{nx:.4f} Y{ny:.4f} I{cx - x:.4f} J{cy - y:.4f}")
+        x, y = nx, ny
+    return "\n".join(lines + ["G40", "G0 X50 Y50", "M2"]) + "\n"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--count", type=int, default=200)
+    ap.add_argument("--kind", choices=("general", "comp"), default="general",
+                    help="general: the mix above; comp: contours under cutter radius compensation")
     args = ap.parse_args(argv)
     if RS274 is None:
         print("error: rs274 (LinuxCNC's interpreter, package linuxcnc-uspace) is not installed", file=sys.stderr)
@@ -95,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
               "only we refuse": 0, "disagree": 0}
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(args.count):
-            text = random_program(rng)
+            text = random_program(rng) if args.kind == "general" else random_comp_program(rng)
             path = Path(tmp) / f"fuzz{args.seed}_{i}.ngc"
             path.write_text(text)
             ref = run_rs274(path, tool_table=TABLE)
@@ -120,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"disagree {path.name}: {problem}\n{text}")
             else:
                 counts["agree"] += 1
-    print(f"seed {args.seed}, {args.count} programs: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    print(f"{args.kind} seed {args.seed}, {args.count} programs: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     return 1 if counts["disagree"] or counts["only we refuse"] or counts["only rs274 refuses"] else 0
 
 

@@ -462,12 +462,13 @@ def test_changing_units_with_a_tool_length_offset_active_is_refused():
 
 
 @needs_rs274
-def test_random_programs_agree_with_rs274():
+@pytest.mark.parametrize("kind", ["general", "comp"])
+def test_random_programs_agree_with_rs274(kind):
     import subprocess
     import sys
 
-    res = subprocess.run([sys.executable, str(ROOT / "scripts" / "fuzz_rs274.py"), "--seed", "11", "--count", "40"],
-                         capture_output=True, text=True, timeout=300)
+    res = subprocess.run([sys.executable, str(ROOT / "scripts" / "fuzz_rs274.py"), "--seed", "11", "--count", "40",
+                          "--kind", kind], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     assert "disagree 0" in res.stdout
 

