@@ -43,9 +43,14 @@ _RS_WORD = re.compile(rf"\s*([A-Za-z])\s*({_NUM})")
 _HEADER_DIALECT = re.compile(r"[(;]\s*dialect\s*=\s*(iso|linuxcnc|heidenhain)\b", re.I)
 
 
-def detect_dialect(text: str) -> str:
+_LINUXCNC_ONLY = re.compile(r"#<|o<|^\s*(?:/?\s*n\d+\s*)?o\s*\d+\s*(?:sub|call|if|while|do|repeat)\b|\[", re.M | re.I)
+
+
+def detect_dialect(text: str, name: str | None = None) -> str:
     """Guess the dialect: Heidenhain if it has ``BEGIN PGM`` or ``L X…`` lines, else the
-    ``dialect=`` header comment, else ISO when blocks are N-numbered, else LinuxCNC."""
+    ``dialect=`` header comment, else LinuxCNC for a ``.ngc`` file or one using LinuxCNC's
+    language (``#<name>``, ``[ ]`` expressions, O-word subroutines), else ISO when blocks are
+    N-numbered, else LinuxCNC."""
     if re.search(r"^\s*\d*\s*BEGIN\s+PGM\b", text, re.M | re.I):
         return "heidenhain"
     m = _HEADER_DIALECT.search(text)
@@ -53,6 +58,8 @@ def detect_dialect(text: str) -> str:
         return m.group(1).lower()
     if re.search(r"^\s*\d+\s+(L|CC|C|CR)\s+I?[XYZ]", text, re.M | re.I):
         return "heidenhain"
+    if (name or "").lower().endswith(".ngc") or _LINUXCNC_ONLY.search(text):
+        return "linuxcnc"
     if re.search(r"^\s*/?\s*N\s*\d+", text, re.M | re.I):
         return "iso"
     return "linuxcnc"
@@ -73,6 +80,8 @@ def read_program(path: str | Path, *, dialect: str | None = None, tool_table: st
         text = p.read_text(encoding="utf-8", errors="strict")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read program {p}: {exc.__class__.__name__}: {exc}") from exc
+    if dialect is None:
+        dialect = detect_dialect(text, name=p.name)
     return parse_program(text, dialect=dialect, name=p.stem, tool_table=tool_table)
 
 
@@ -85,7 +94,8 @@ def parse_program(text: str, *, dialect: str | None = None, name: str = "program
     text : str
         Program text.
     dialect : str or None
-        "iso", "heidenhain", "linuxcnc" or None to detect (see :func:`detect_dialect`).
+        "iso", "heidenhain", "linuxcnc" or None to detect (see :func:`detect_dialect`; a
+        ``name`` ending in ``.ngc`` counts as LinuxCNC).
     name : str
         Program name used in error messages (a Heidenhain ``BEGIN PGM`` name replaces it).
     tool_table : path, dict or None
@@ -103,7 +113,7 @@ def parse_program(text: str, *, dialect: str | None = None, name: str = "program
         Unknown or unsupported word, missing feed, inconsistent arc …, with the line number.
     """
     if dialect is None:
-        dialect = detect_dialect(text)
+        dialect = detect_dialect(text, name=name)
     if dialect not in DIALECT_NAMES:
         raise InputError(f"unknown dialect {dialect!r} (use one of {', '.join(DIALECT_NAMES)})")
     if dialect != "heidenhain":

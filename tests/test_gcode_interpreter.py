@@ -192,6 +192,12 @@ def test_detects_dialects():
     assert detect_dialect("G21 G90\nG0 X1\nM2\n") == "linuxcnc"
     assert detect_dialect("(dialect=iso)\nG0 X1\n") == "iso"
     assert detect_dialect("1 L X+1 R0 FMAX\n") == "heidenhain"
+    # N-numbered LinuxCNC programs (LinuxCNC's own samples): by extension or by language
+    assert detect_dialect("n10 G4 P0.5\n", name="cds.ngc") == "linuxcnc"
+    assert detect_dialect("N10 #<x> = 1\nN20 G0 X#<x>\n") == "linuxcnc"
+    assert detect_dialect("N10 o100 sub\nN20 o100 endsub\n") == "linuxcnc"
+    assert detect_dialect("N10 G0 X[1+1]\n") == "linuxcnc"
+    assert detect_dialect("N10 G04 P500\n", name="part.nc") == "iso"
 
 
 def test_unknown_dialect_is_an_input_error():
