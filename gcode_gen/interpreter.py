@@ -3,15 +3,11 @@
 What is understood (everything the writers produce, plus the common motion subset):
 
 RS274 (``iso``, ``linuxcnc``)
-    ``G0/G00`` rapid, ``G1`` linear, ``G2``/``G3`` arcs in the XY plane with ``I J`` centre
-    offsets (relative to the arc start, or absolute after ``G90.1``) or ``R`` radius
-    (R < 0: the arc longer than 180°), ``G4`` dwell (LinuxCNC ``P`` seconds; ISO ``X``
-    seconds or ``P`` milliseconds, the Fanuc convention), ``F`` in units/min, ``N`` numbers,
-    comments ``( )`` and ``;``, ``G90``/``G91``, ``G20`` (inch, converted to mm) /``G21``,
-    ``G17``, ``G94``, ``G61``/``G61.1``/``G64`` (path mode, accepted), ``G40 G49 G80 G54``
-    (cancel/default states, accepted), ``M2``/``M30``/``%`` program end, ``M0 M1 M3 M4 M5
-    M8 M9`` and ``S``/``T`` words (no motion, accepted and ignored), ``/`` block delete
-    (block executed).
+    the RS274/NGC language as LinuxCNC's interpreter runs it — parameters, expressions,
+    O-word subroutines and loops, offsets, tool length offsets, G28/G30, G53, arcs in all
+    three planes, canned cycles, polar coordinates … — by :mod:`gcode_gen.ngc`; the full
+    list of what is supported and refused is docs/gcode-support.md.  ISO differs only in
+    its dwell: ``G4 X`` seconds or ``P`` milliseconds (Fanuc), LinuxCNC ``G4 P`` seconds.
 Heidenhain conversational (``heidenhain``)
     leading block numbers, ``BEGIN PGM name MM|INCH``, ``END PGM``, ``L`` with absolute
     (``X+1.5``) or incremental (``IX+1.5``) coordinates, ``R0``, ``F`` (mm/min, modal),
@@ -32,6 +28,8 @@ import re
 from pathlib import Path
 
 from core.errors import InputError, ProgramError
+from gcode_gen.ngc import Tool, interpret, read_tool_table
+from gcode_gen.ngc.arcs import ArcError, center_from_radius
 from gcode_gen.program import AXIS_LETTERS, Block, Program
 
 __all__ = ["parse_program", "read_program", "detect_dialect", "DIALECT_NAMES"]
@@ -45,9 +43,14 @@ _RS_WORD = re.compile(rf"\s*([A-Za-z])\s*({_NUM})")
 _HEADER_DIALECT = re.compile(r"[(;]\s*dialect\s*=\s*(iso|linuxcnc|heidenhain)\b", re.I)
 
 
-def detect_dialect(text: str) -> str:
+_LINUXCNC_ONLY = re.compile(r"#<|o<|^\s*(?:/?\s*n\d+\s*)?o\s*\d+\s*(?:sub|call|if|while|do|repeat)\b|\[", re.M | re.I)
+
+
+def detect_dialect(text: str, name: str | None = None) -> str:
     """Guess the dialect: Heidenhain if it has ``BEGIN PGM`` or ``L X…`` lines, else the
-    ``dialect=`` header comment, else ISO when blocks are N-numbered, else LinuxCNC."""
+    ``dialect=`` header comment, else LinuxCNC for a ``.ngc`` file or one using LinuxCNC's
+    language (``#<name>``, ``[ ]`` expressions, O-word subroutines), else ISO when blocks are
+    N-numbered, else LinuxCNC."""
     if re.search(r"^\s*\d*\s*BEGIN\s+PGM\b", text, re.M | re.I):
         return "heidenhain"
     m = _HEADER_DIALECT.search(text)
@@ -55,12 +58,14 @@ def detect_dialect(text: str) -> str:
         return m.group(1).lower()
     if re.search(r"^\s*\d+\s+(L|CC|C|CR)\s+I?[XYZ]", text, re.M | re.I):
         return "heidenhain"
+    if (name or "").lower().endswith(".ngc") or _LINUXCNC_ONLY.search(text):
+        return "linuxcnc"
     if re.search(r"^\s*/?\s*N\s*\d+", text, re.M | re.I):
         return "iso"
     return "linuxcnc"
 
 
-def read_program(path: str | Path, *, dialect: str | None = None) -> Program:
+def read_program(path: str | Path, *, dialect: str | None = None, tool_table: str | Path | dict[int, Tool] | None = None) -> Program:
     """Read a program file; the name is the file stem.
 
     Raises
@@ -75,10 +80,13 @@ def read_program(path: str | Path, *, dialect: str | None = None) -> Program:
         text = p.read_text(encoding="utf-8", errors="strict")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot read program {p}: {exc.__class__.__name__}: {exc}") from exc
-    return parse_program(text, dialect=dialect, name=p.stem)
+    if dialect is None:
+        dialect = detect_dialect(text, name=p.name)
+    return parse_program(text, dialect=dialect, name=p.stem, tool_table=tool_table)
 
 
-def parse_program(text: str, *, dialect: str | None = None, name: str = "program") -> Program:
+def parse_program(text: str, *, dialect: str | None = None, name: str = "program",
+                  tool_table: str | Path | dict[int, Tool] | None = None) -> Program:
     """Parse program ``text`` in ``dialect`` (auto-detected when None).
 
     Parameters
@@ -86,9 +94,13 @@ def parse_program(text: str, *, dialect: str | None = None, name: str = "program
     text : str
         Program text.
     dialect : str or None
-        "iso", "heidenhain", "linuxcnc" or None to detect (see :func:`detect_dialect`).
+        "iso", "heidenhain", "linuxcnc" or None to detect (see :func:`detect_dialect`; a
+        ``name`` ending in ``.ngc`` counts as LinuxCNC).
     name : str
         Program name used in error messages (a Heidenhain ``BEGIN PGM`` name replaces it).
+    tool_table : path, dict or None
+        LinuxCNC tool table (file in mm, or tools from :func:`gcode_gen.ngc.read_tool_table`)
+        for G43 tool length offsets and cutter radii; without one, a tool offset is an error.
 
     Returns
     -------
@@ -101,10 +113,14 @@ def parse_program(text: str, *, dialect: str | None = None, name: str = "program
         Unknown or unsupported word, missing feed, inconsistent arc …, with the line number.
     """
     if dialect is None:
-        dialect = detect_dialect(text)
+        dialect = detect_dialect(text, name=name)
     if dialect not in DIALECT_NAMES:
         raise InputError(f"unknown dialect {dialect!r} (use one of {', '.join(DIALECT_NAMES)})")
-    reader = _HeidenhainReader(name) if dialect == "heidenhain" else _RS274Reader(name, dialect)
+    if dialect != "heidenhain":
+        tools = read_tool_table(tool_table) if isinstance(tool_table, (str, Path)) else tool_table
+        blocks, header = interpret(text, name=name, dialect=dialect, tools=tools)
+        return Program(name=name, dialect=dialect, blocks=tuple(blocks), header=header, text=text)
+    reader = _HeidenhainReader(name)
     reader.run(text)
     return Program(name=reader.name, dialect=dialect, blocks=tuple(reader.blocks), header=reader.header, text=text)
 
@@ -180,7 +196,10 @@ class _Reader:
         x0, y0 = self.pos["X"], self.pos["Y"]
         x1, y1 = end.get("X", x0), end.get("Y", y0)
         if radius is not None:
-            center = _center_from_radius(x0, y0, x1, y1, radius, motion == "G2", self.error)
+            try:
+                center = center_from_radius(x0, y0, x1, y1, radius, motion == "G2")
+            except ArcError as exc:
+                raise self.error(str(exc)) from None
         assert center is not None
         cx, cy = center
         r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
@@ -191,197 +210,6 @@ class _Reader:
         target = {"X": x1, "Y": y1}
         target.update({k: v for k, v in end.items() if k not in target})
         self.add_move(n, motion, target, {"X": cx, "Y": cy})
-
-
-def _center_from_radius(x0: float, y0: float, x1: float, y1: float, r: float, clockwise: bool, error) -> tuple[float, float]:  # noqa: ANN001
-    """Arc centre from the chord and radius; r < 0 selects the arc longer than 180°."""
-    dx, dy = x1 - x0, y1 - y0
-    chord = math.hypot(dx, dy)
-    if chord < 1e-9:
-        raise error("radius-format arc cannot be a full circle (use I/J or CC)")
-    if abs(r) < chord / 2 - 1e-6:
-        raise error(f"arc radius {abs(r):.4f} mm is shorter than half the chord {chord / 2:.4f} mm")
-    h = math.sqrt(max(r * r - chord * chord / 4, 0.0))
-    # Left normal of the chord; a clockwise short arc has its centre on the right.
-    nx, ny = -dy / chord, dx / chord
-    side = -1.0 if clockwise else 1.0
-    if r < 0:
-        side = -side
-    return (x0 + dx / 2 + side * h * nx, y0 + dy / 2 + side * h * ny)
-
-
-class _RS274Reader(_Reader):
-    """ISO / LinuxCNC word-address reader."""
-
-    _ACCEPTED_G = {17.0, 40.0, 49.0, 54.0, 61.0, 61.1, 64.0, 80.0, 94.0}
-    _ACCEPTED_M = {0, 1, 3, 4, 5, 8, 9}
-
-    def __init__(self, name: str, dialect: str) -> None:
-        super().__init__(name)
-        self.dialect = dialect
-        self.motion: str | None = None
-        self.absolute = True
-        self.arc_absolute = False
-        self.seen_percent = False
-
-    def run(self, text: str) -> None:
-        for self.line, raw in enumerate(text.splitlines(), start=1):
-            if self.ended:
-                break
-            self.do_line(raw)
-
-    def strip_comments(self, raw: str) -> str:
-        out, i = [], 0
-        while i < len(raw):
-            ch = raw[i]
-            if ch == "(":
-                j = raw.find(")", i + 1)
-                if j < 0:
-                    raise self.error("comment '(' is not closed on the same line")
-                self.comment(raw[i + 1 : j])
-                i = j + 1
-            elif ch == ";":
-                self.comment(raw[i + 1 :])
-                break
-            else:
-                out.append(ch)
-                i += 1
-        return "".join(out)
-
-    def do_line(self, raw: str) -> None:
-        code = self.strip_comments(raw).strip()
-        if code.startswith("/"):
-            code = code[1:].strip()
-        if not code:
-            return
-        if code == "%":
-            if self.seen_percent or self.blocks:
-                self.ended = True
-            self.seen_percent = True
-            return
-        words: list[tuple[str, float, str]] = []
-        pos = 0
-        while pos < len(code):
-            m = _RS_WORD.match(code, pos)
-            if not m:
-                rest = code[pos:].strip()
-                if not rest:
-                    break
-                raise self.error(f"unknown word {rest.split()[0]!r}")
-            letter = m.group(1).upper()
-            if letter == "O":
-                raise self.error(f"O-word O{m.group(2).strip()} (subroutines, program numbers) is not supported")
-            words.append((letter, self.number(m.group(2)), m.group(2).replace(" ", "")))
-            pos = m.end()
-        self.do_words(words)
-
-    def do_words(self, words: list[tuple[str, float, str]]) -> None:
-        n: int | None = None
-        gs: list[float] = []
-        ms: list[int] = []
-        vals: dict[str, float] = {}
-        raw: dict[str, str] = {}
-        for letter, value, text in words:
-            if letter == "N":
-                n = int(value)
-            elif letter == "G":
-                gs.append(round(value, 1))
-            elif letter == "M":
-                ms.append(int(value))
-            elif letter == "O":
-                raise self.error(f"O-word O{text} (subroutines, program numbers) is not supported")
-            elif letter in AXIS_LETTERS or letter in "IJKRPFSTQ":
-                if letter in vals:
-                    raise self.error(f"word {letter} appears twice in one block")
-                if letter == "Q":
-                    raise self.error(f"unknown word Q{text}")
-                vals[letter] = value
-                raw[letter] = text
-            else:
-                raise self.error(f"unknown word {letter}{text}")
-
-        dwell = False
-        new_motion: str | None = None
-        for g in gs:
-            if g in (0.0, 1.0, 2.0, 3.0):
-                if new_motion is not None:
-                    raise self.error("two motion G-codes in one block")
-                new_motion = f"G{int(g)}"
-            elif g == 4.0:
-                dwell = True
-            elif g == 20.0:
-                self.scale = INCH
-            elif g == 21.0:
-                self.scale = 1.0
-            elif g == 90.0:
-                self.absolute = True
-            elif g == 91.0:
-                self.absolute = False
-            elif g == 90.1:
-                self.arc_absolute = True
-            elif g == 91.1:
-                self.arc_absolute = False
-            elif g in (18.0, 19.0):
-                raise self.error(f"G{g:g}: only the XY plane (G17) is supported")
-            elif g in (93.0, 95.0):
-                raise self.error(f"G{g:g}: only feed per minute (G94) is supported")
-            elif g not in self._ACCEPTED_G:
-                raise self.error(f"unknown or unsupported G-code G{g:g}")
-        for m in ms:
-            if m in (2, 30):
-                self.ended = True
-            elif m not in self._ACCEPTED_M:
-                raise self.error(f"unknown or unsupported M-code M{m}")
-
-        if "F" in vals:
-            self.set_feed(vals["F"])
-        if dwell:
-            if new_motion is not None:
-                raise self.error("G4 dwell and a motion G-code in one block")
-            if self.dialect == "iso" and "X" in vals:
-                seconds = vals.pop("X")
-            elif "P" in vals:
-                seconds = vals.pop("P") / (1000.0 if self.dialect == "iso" else 1.0)
-            else:
-                raise self.error("G4 dwell without a time (P)")
-            extra = [k for k in vals if k not in "FST"]
-            if extra:
-                raise self.error(f"word {extra[0]} not allowed in a dwell block")
-            self.add_dwell(n, seconds)
-            return
-        if new_motion is not None:
-            self.motion = new_motion
-        if "P" in vals and 64.0 not in gs:
-            raise self.error(f"word P{raw['P']} without G4 or G64")
-
-        axis_words = {k: v for k, v in vals.items() if k in AXIS_LETTERS}
-        arc_words = {k: v for k, v in vals.items() if k in "IJKR"}
-        is_arc = self.motion in ("G2", "G3")
-        if arc_words and not (is_arc and (axis_words or new_motion)):
-            raise self.error(f"word {next(iter(arc_words))} without an arc (G2/G3)")
-        if not axis_words and not (is_arc and new_motion and arc_words):
-            return  # modal settings only
-        if self.motion is None:
-            raise self.error("axis words without a motion mode (G0/G1/G2/G3)")
-        target = {ax: self.axis_value(ax, v, not self.absolute) for ax, v in axis_words.items()}
-        if not is_arc:
-            self.add_move(n, self.motion, target)
-            return
-        if "K" in arc_words:
-            raise self.error("K offset in the XY plane (G17)")
-        if "R" in arc_words:
-            if "I" in arc_words or "J" in arc_words:
-                raise self.error("arc with both R and I/J")
-            self.arc(n, self.motion, target, None, arc_words["R"] * self.scale)
-            return
-        if "I" not in arc_words and "J" not in arc_words:
-            raise self.error(f"{self.motion} arc without I/J or R")
-        if "X" not in self.pos or "Y" not in self.pos:
-            raise self.error("arc from an unknown X/Y position (program a linear move first)")
-        i = arc_words.get("I", 0.0) * self.scale
-        j = arc_words.get("J", 0.0) * self.scale
-        center = (i, j) if self.arc_absolute else (self.pos["X"] + i, self.pos["Y"] + j)
-        self.arc(n, self.motion, target, center, None)
 
 
 class _HeidenhainReader(_Reader):

@@ -10,7 +10,9 @@ Conventions (the same everywhere in gcode_gen):
 
 * positions in mm (degrees for rotary axes A/B/C), absolute, machine coordinates;
 * feeds in mm/s (the text carries mm/min, the usual ``F`` unit; converted on read);
-* arcs lie in the XY plane (G17); the centre is absolute;
+* arcs lie in the block's ``plane`` ("XY" for G17, "XZ" for G18, "YZ" for G19); the
+  centre is absolute, keyed by the plane's two axes; G2 turns clockwise seen from the
+  plane's normal (+Z, +Y, +X respectively), as LinuxCNC;
 * axis letters upper case, one of :data:`AXIS_LETTERS`.
 """
 
@@ -49,6 +51,15 @@ class Block:
         Absolute arc centre in mm (keys ``"X"``, ``"Y"``) for G2/G3; None otherwise.
     dwell_s : float or None
         Dwell time in s for G4; None otherwise.
+    plane : str
+        Plane of an arc: "XY" (G17, default), "XZ" (G18: first axis Z, second X) or
+        "YZ" (G19: first Y, second Z); the third axis moves linearly (helix).
+    turns : int
+        Full turns of an arc (G2/G3 ``P``, default 1): the arc runs ``turns - 1`` full
+        circles more than the sweep from start to end.
+    blend_tolerance : float or None
+        Path mode in effect: None for exact stop (G61/G61.1, canned cycles), ``inf`` for G64
+        without P (blend at best speed), else the G64 P tolerance in mm.
     """
 
     line: int
@@ -58,6 +69,9 @@ class Block:
     feed: float | None = None
     center: dict[str, float] | None = None
     dwell_s: float | None = None
+    plane: str = "XY"
+    turns: int = 1
+    blend_tolerance: float | None = None
 
 
 @dataclass(frozen=True)

@@ -153,21 +153,21 @@ def test_heidenhain_inch_programs():
 @pytest.mark.parametrize(
     "text, dialect, line, message",
     [
-        ("G21\nG1 X1 F100\nG1 X2 Q5\n", "linuxcnc", 3, "unknown word Q5"),
-        ("G21\nG28 X0\n", "linuxcnc", 2, "unsupported G-code G28"),
+        ("G21\nG1 X1 F100\nG1 X2 Q5\n", "linuxcnc", 3, "word Q5 is not used"),
+        ("G21\nG33 X1 K1\n", "linuxcnc", 2, "spindle-synchronised motion G33 is not supported"),
         ("G21\nG1 X1\n", "linuxcnc", 2, "without a programmed feed"),
         ("G0 X0 Y0\nG2 X10 Y0 I3 J0 F100\n", "linuxcnc", 2, "differs from start radius"),
         ("G0 X0 Y0\nG2 X10 Y0 R2 F100\n", "linuxcnc", 2, "shorter than half the chord"),
         ("G0 X1 (open comment\n", "linuxcnc", 1, "not closed"),
-        ("O100 sub\n", "linuxcnc", 1, "O-word"),
+        ("O100 sub\n", "linuxcnc", 1, "o100 sub without endsub"),
         ("G0 X1\nX2 G1 G0\n", "linuxcnc", 2, "two motion G-codes"),
         ("X1\n", "linuxcnc", 1, "without a motion mode"),
-        ("G0 X0 Y0\nG1 X1 I2 F100\n", "linuxcnc", 2, "without an arc"),
-        ("N10 G0 X0\nN20 M98\n", "iso", 2, "unsupported M-code M98"),
-        ("G18\n", "linuxcnc", 1, "only the XY plane"),
-        ("G1 X1 F0\n", "linuxcnc", 1, "must be positive"),
+        ("G0 X0 Y0\nG1 X1 I2 F100\n", "linuxcnc", 2, "word I2 is not used"),
+        ("N10 G0 X0\nN20 M98\n", "iso", 2, "M98 is not supported"),
+        ("G18\nG0 X0 Z0\nG81 R1 Z-1 F10 X1\n", "linuxcnc", 3, "outside the XY plane"),
+        ("G1 X1 F0\n", "linuxcnc", 1, "feed must be positive"),
         ("G1 X1 X2 F10\n", "linuxcnc", 1, "appears twice"),
-        ("G1 X$1\n", "linuxcnc", 1, "unknown word"),
+        ("G1 X$1\n", "linuxcnc", 1, "bad number or value"),
         ("0 BEGIN PGM A MM\n1 L X+1 RL F100\n", "heidenhain", 2, "radius compensation"),
         ("0 BEGIN PGM A MM\n1 L X+1 Y+0 F100\n2 C X+0 Y+1 DR+\n", "heidenhain", 3, "without a centre CC"),
         ("0 BEGIN PGM A MM\n1 L X+1 Y+0 F100\n2 CC X+0 Y+0\n3 C X+0 Y+1\n", "heidenhain", 4, "without a direction"),
@@ -192,6 +192,12 @@ def test_detects_dialects():
     assert detect_dialect("G21 G90\nG0 X1\nM2\n") == "linuxcnc"
     assert detect_dialect("(dialect=iso)\nG0 X1\n") == "iso"
     assert detect_dialect("1 L X+1 R0 FMAX\n") == "heidenhain"
+    # N-numbered LinuxCNC programs (LinuxCNC's own samples): by extension or by language
+    assert detect_dialect("n10 G4 P0.5\n", name="cds.ngc") == "linuxcnc"
+    assert detect_dialect("N10 #<x> = 1\nN20 G0 X#<x>\n") == "linuxcnc"
+    assert detect_dialect("N10 o100 sub\nN20 o100 endsub\n") == "linuxcnc"
+    assert detect_dialect("N10 G0 X[1+1]\n") == "linuxcnc"
+    assert detect_dialect("N10 G04 P500\n", name="part.nc") == "iso"
 
 
 def test_unknown_dialect_is_an_input_error():
