@@ -24,6 +24,15 @@ Model (the interpolator the thesis's identification experiment assumes, §3.3-3.
   lowered so the centripetal acceleration v²/r stays <= a_max/√2, and the tangential
   acceleration is limited to sqrt(a_max² - (v²/r)²), so the total acceleration vector stays
   <= a_max.  The jerk limit (if any) applies along the path only.
+* **Per-axis limits** (``axis_limits``, LinuxCNC's planner): instead of one path
+  acceleration, each axis has its own maximum velocity and acceleration (LinuxCNC INI
+  ``[AXIS_x]``/``[JOINT_n]`` MAX_VELOCITY/MAX_ACCELERATION).  A line with unit direction u
+  runs at path speed <= min_i v_i/|u_i| and path acceleration <= min_i a_i/|u_i| (as
+  LinuxCNC's canon computes them: 2000 mm/s² per axis is 2828 mm/s² along a 45° line).  An
+  arc in the XY plane takes a = min(a_X, a_Y) and v <= min(v_X, v_Y), the speed lowered so
+  the centripetal v²/r stays <= 0.866·a (LinuxCNC's BLEND_ACC_RATIO_NORMAL); the tangential
+  acceleration is sqrt(a² − (v_l²/r)²) with v_l the arc's speed *limit* (not its feed; half
+  of a when v_l is cut: LinuxCNC 2.9's ``pmCircleActualMaxVel`` on the segment's maxvel).
 * **Blending** (``blending=True``, the G64 idea restricted to what keeps the limits exact):
   consecutive linear blocks with the same direction and feed are run as one move, without
   stopping in between; any corner, reversal, feed change, arc or dwell still stops.
@@ -37,14 +46,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from core.errors import InputError
 from gcode_gen.program import Block, Program
 
-__all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile"]
+__all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile",
+           "AxisLimits", "ARC_NORMAL_RATIO_PATH", "ARC_NORMAL_RATIO_LINUXCNC"]
+
+#: Centripetal share of the acceleration limit on an arc: the path-limited interpolator's.
+ARC_NORMAL_RATIO_PATH = 1.0 / math.sqrt(2.0)
+#: ... and LinuxCNC's (tp's BLEND_ACC_RATIO_NORMAL, used with per-axis limits).
+ARC_NORMAL_RATIO_LINUXCNC = 0.8660
+
+#: Per-axis limits: axis letter -> (maximum velocity mm/s, maximum acceleration mm/s²).
+AxisLimits = Mapping[str, "tuple[float, float]"]
 
 
 @dataclass(frozen=True)
@@ -192,8 +210,26 @@ def _check(Ts: float, a_max: float, j_max: float | None, rapid_feed: float) -> N
         raise InputError(f"j_max must be a positive number of mm/s³ or None, got {j_max}")
 
 
-def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, rapid_feed: float, blending: bool) -> list[_Segment]:
+def _line_limits(d: np.ndarray, vmax: np.ndarray | None, amax: np.ndarray | None, a_path: float) -> tuple[float, float]:
+    """(path speed cap, path acceleration) of a line of direction ``d`` (mm) under per-axis limits.
+
+    Each axis i moves |u_i| of the path: v <= v_i/|u_i|, a <= a_i/|u_i| (LinuxCNC's canon).
+    Without per-axis limits: no speed cap, the path acceleration ``a_path``.
+    """
+    if vmax is None:
+        return math.inf, a_path
+    u = np.abs(d) / float(np.linalg.norm(d))
+    moving = u > 1e-12
+    return float(np.min(vmax[moving] / u[moving])), float(np.min(amax[moving] / u[moving]))
+
+
+def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, rapid_feed: float, blending: bool,
+              axis_limits: AxisLimits | None = None) -> list[_Segment]:
     index = {ax: i for i, ax in enumerate(names)}
+    vmax = amax = None
+    if axis_limits:
+        vmax = np.array([axis_limits[ax][0] if ax in axis_limits else math.inf for ax in names])
+        amax = np.array([axis_limits[ax][1] if ax in axis_limits else math.inf for ax in names])
     segs: list[_Segment] = []
     for b in program.blocks:
         if b.motion == "G4":
@@ -207,14 +243,23 @@ def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, r
         else:
             if b.feed is None or not b.feed > 0:
                 raise InputError(f"line {b.line}: {b.motion} block without a positive feed")
-            feed = float(b.feed)
+            # LinuxCNC: the rapid speed is the path speed cap, feeds above it are lowered to it
+            feed = float(b.feed) if vmax is None else min(float(b.feed), rapid_feed)
         if b.motion in ("G2", "G3"):
-            segs.append(_arc_segment(b, p, q, index, feed, a_max))
+            if vmax is None:
+                segs.append(_arc_segment(b, p, q, index, feed, a_max))
+            else:
+                plane = [index[a] for a in ("X", "Y") if a in index]
+                v_limit = min(float(np.min(vmax[plane])), rapid_feed)
+                segs.append(_arc_segment(b, p, q, index, min(feed, v_limit), float(np.min(amax[plane])),
+                                         ARC_NORMAL_RATIO_LINUXCNC, v_limit))
         else:
             L = float(np.linalg.norm(q - p))
             if L <= 1e-12:
                 p = q
                 continue
+            v_cap, a_line = _line_limits(q - p, vmax, amax, a_max)
+            feed = min(feed, v_cap)
             prev = segs[-1] if segs else None
             if (blending and prev is not None and prev.kind == "line" and prev.motion == b.motion
                     and prev.feed == feed
@@ -224,12 +269,16 @@ def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, r
                 prev.lines.append(b.line)
                 prev.breaks.append(prev.L)
             else:
-                segs.append(_Segment("line", p.copy(), q.copy(), L, feed, a_max, [b.line], [L], motion=b.motion, feed=feed))
+                segs.append(_Segment("line", p.copy(), q.copy(), L, feed, a_line, [b.line], [L], motion=b.motion, feed=feed))
         p = q
     return segs
 
 
-def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], feed: float, a_max: float) -> _Segment:
+def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], feed: float, a_max: float,
+                 normal_ratio: float = ARC_NORMAL_RATIO_PATH, v_limit: float | None = None) -> _Segment:
+    """An arc block; ``v_limit`` (LinuxCNC): the tangential acceleration is set for the arc's
+    speed limit, not its feed (tc's ``pmCircleActualMaxVel`` with the segment's maxvel),
+    so a feed override could raise the speed without exceeding the limits."""
     if b.center is None or "X" not in index or "Y" not in index:
         raise InputError(f"line {b.line}: arc without an XY centre")
     ix, iy = index["X"], index["Y"]
@@ -251,9 +300,10 @@ def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], 
     other[ix] = other[iy] = 0.0
     L = math.hypot(0.5 * (r0 + r1) * abs(dth), float(np.linalg.norm(other)))
     r = min(r0, r1)
-    # Centripetal v²/r <= a_max/√2; tangential limited so |a| stays <= a_max.
-    v = min(feed, math.sqrt(a_max * r / math.sqrt(2.0)))
-    an = v * v / r
+    # Centripetal v²/r <= normal_ratio·a_max; tangential limited so |a| stays <= a_max.
+    v_cut = math.sqrt(a_max * r * normal_ratio)
+    v = min(feed, v_cut)
+    an = min(v_limit, v_cut) ** 2 / r if v_limit is not None else v * v / r
     at = math.sqrt(max(a_max * a_max - an * an, 0.0))
     return _Segment("arc", p.copy(), q.copy(), L, v, at, [b.line], [L], arc=(cx, cy, r0, r1, th0, dth, ix, iy), motion=b.motion, feed=feed)
 
@@ -267,6 +317,7 @@ def interpolate(
     rapid_feed: float = 200.0,
     start: dict[str, float] | None = None,
     blending: bool = False,
+    axis_limits: AxisLimits | None = None,
 ) -> Trajectory:
     """Commanded trajectory of ``program`` sampled every ``Ts`` seconds.
 
@@ -287,6 +338,10 @@ def interpolate(
         the program commands for them (so the opening positioning move costs nothing).
     blending : bool
         Run consecutive same-direction, same-feed linear blocks without stopping.
+    axis_limits : dict or None
+        Axis letter -> (max velocity mm/s, max acceleration mm/s²): plan with per-axis
+        limits as LinuxCNC does (module docstring); ``a_max`` is then not used.  An axis
+        not named is unlimited.
 
     Returns
     -------
@@ -300,7 +355,11 @@ def interpolate(
         for ax, v in b.target.items():
             first.setdefault(ax, v)
     p0 = np.array([(start or {}).get(ax, first.get(ax, 0.0)) for ax in names], dtype=float)
-    segs = _segments(program, names, p0, a_max, rapid_feed, blending)
+    if axis_limits:
+        for ax, (v, a) in axis_limits.items():
+            if not (math.isfinite(v) and v > 0 and math.isfinite(a) and a > 0):
+                raise InputError(f"axis {ax}: limits must be positive numbers, got velocity {v}, acceleration {a}")
+    segs = _segments(program, names, p0, a_max, rapid_feed, blending, axis_limits)
 
     # Per segment: profile and number of samples on the Ts grid.
     n = np.zeros(len(segs), dtype=np.int64)
