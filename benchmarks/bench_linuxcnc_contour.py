@@ -6,7 +6,8 @@ linuxcnc://, agent identify), then each program is run on LinuxCNC while capture
 predicted stand-alone by `agent predict PROGRAM --machine result.json --ini machine.ini
 --against RECORDING`: the program planned here with LinuxCNC's per-axis limits from the
 INI and run on the identified drives, against the measured contour error over the same
-feed moves, and the program's run time.  Programs: circle and diamond (20 mm) at 10 and
+feed moves, and the program's run time; and the same with the path-limited planner (no
+--ini), to show what planning with per-axis limits changes.  Programs: circle and diamond (20 mm) at 10 and
 100 mm/s, the ballbar test (`agent ballbar --program-out`: R 10 mm at 1000 mm/min, ccw
 and cw with 180° feed-in/out arcs, one program) and a small part (fixtures/linuxcnc/part.ngc).
 Every run starts with the machine switched off and on (the loop's state at zero, the
@@ -95,16 +96,21 @@ def main() -> int:
                   "--json", work / "p.json")
             c = json.loads((work / "p.json").read_text())["comparisons"][0]
             s = c["standalone"]
+            # the same with the path-limited planner (no --ini): what per-axis planning changes
+            agent("predict", prog, "--machine", work / "result.json", "--against", rec, "--json", work / "q.json")
+            q = json.loads((work / "q.json").read_text())["comparisons"][0]
             rows.append((name, c["measured_max_abs_mm"] * 1e3, s["predicted_max_abs_mm"] * 1e3, s["max_ratio"] - 1,
                          s["rms_difference_ratio"], c["rms_difference_ratio"], c["measured_cycle_time_s"],
-                         c["predicted_cycle_time_s"]))
+                         c["predicted_cycle_time_s"], q["standalone"]["max_ratio"] - 1,
+                         q["predicted_cycle_time_s"] / q["measured_cycle_time_s"] - 1))
         bb = agent("ballbar", "--machine", work / "result.json", "--ini", ini, "--radius", 10, "--feed", 1000 / 60,
                    "--against", work / "ballbar.mcap")
     print(f"\n{'program':34s} {'measured':>9s} {'predicted':>9s} {'max':>7s} {'rms diff':>8s} {'(rec cmd)':>9s}"
-          f" {'cycle meas.':>11s} {'pred.':>7s} {'diff':>7s}")
-    for name, mm, pm, dmax, rms, rms_rec, cm, cp in rows:
+          f" {'cycle meas.':>11s} {'pred.':>7s} {'diff':>7s} | path-limited: {'max':>7s} {'cycle':>7s}")
+    for name, mm, pm, dmax, rms, rms_rec, cm, cp, path_max, path_cycle in rows:
         print(f"{name:34s} {mm:7.2f}µm {pm:7.2f}µm {dmax * 100:+6.1f}% {rms * 100:7.1f}% {rms_rec * 100:8.1f}%"
-              f" {cm:10.3f}s {cp:6.3f}s {(cp / cm - 1) * 100:+6.2f}%")
+              f" {cm:10.3f}s {cp:6.3f}s {(cp / cm - 1) * 100:+6.2f}% | {'':14s}"
+              f"{path_max * 100:+6.1f}% {path_cycle * 100:+6.2f}%")
     print("\nagent ballbar --against the recorded test:")
     print("\n".join("  " + ln for ln in bb.splitlines() if "circularity" in ln or "hysteresis" in ln or "recorded" in ln))
     ok = all(abs(r[3]) <= 0.05 and r[4] <= 0.10 and abs(r[7] / r[6] - 1) <= 0.01 for r in rows)
