@@ -351,6 +351,8 @@ def compare(machine: VirtualMachine, recording: Recording, run: CommandedRun | N
     measured = contour_of_run(run, cmd, act, labels, recording.t)
     predicted = contour_of_run(run, cmd, pred, labels, recording.t)
     mask = _feed_moves(run, cmd, labels)
+    if not mask.any():
+        raise ValueError("its command does not run the program's feed moves (another program, or another start?)")
     standalone = _standalone(machine, run, axes, measured, mask, labels)
     return Comparison(source, recording.t, measured, predicted, mask,
                       cycle_time_s(run, cmd, labels, recording.sample_period), cycle_time_s(run), standalone)

@@ -88,3 +88,9 @@ def test_recorded_samples_are_assigned_to_the_block_whose_end_they_reach(machine
     seg, line = block_of_samples(run, run.commanded)
     moving = np.concatenate([[False], np.diff(run.commanded["X"]) != 0])
     np.testing.assert_array_equal(line[moving], run.line[moving])
+
+
+def test_a_recording_of_another_program_is_refused_with_a_reason(machine):
+    recorded = virtual_cnc.simulate([gcode_gen.diamond(size=20, feed=100)], "fadal-pid", seed=5)
+    with pytest.raises(ValueError, match="does not run the program's feed moves"):
+        compare(machine, recorded, machine.run([gcode_gen.circle(size=40, feed=100, start_deg=30)]).run)
