@@ -11,7 +11,6 @@ from __future__ import annotations
 import configparser
 import json
 import subprocess
-from pathlib import Path
 
 import pytest
 
