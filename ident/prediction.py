@@ -21,6 +21,7 @@ prediction.  The cycle time is the program's run time: first to last moving comm
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -296,8 +297,22 @@ def analyse(pred: Prediction) -> PredictionSummary:
         cmax, crms = float(c.max()), float(np.sqrt(np.mean(contour[sel] ** 2)))
         worst = _worst_places(run, rec, c, sel, names)
     return PredictionSummary(pred.machine.name, tuple(axes), tracking, contour, feed, cmax, crms,
-                             tuple(worst or ()), pred.warnings, pred,
+                             tuple(worst or ()), tuple(pred.warnings) + tuple(_path_mode_warnings(run)), pred,
                              cycle_time_s(run), pred.machine.planner)
+
+
+_G64 = re.compile(r"G0*64(?![.\d])", re.IGNORECASE)
+_COMMENT = re.compile(r"\([^)]*\)|;.*")
+
+
+def _path_mode_warnings(run: CommandedRun) -> list[str]:
+    """A program that blends (G64) is planned as exact stop: say so."""
+    out = []
+    for info, text in zip(run.programs, run.texts):
+        if any(_G64.search(_COMMENT.sub("", ln).replace(" ", "")) for ln in text.splitlines()):
+            out.append(f"{info['name']}: G64 path blending is not modelled, every block is planned to end at rest "
+                       f"(G61.1): corners come out sharper and the cycle time longer than the controller's")
+    return out
 
 
 def _worst_places(run: CommandedRun, rec: Recording, c: np.ndarray, sel: np.ndarray, names: list[str]) -> list[Place]:

@@ -117,3 +117,14 @@ def test_a_bad_ini_is_a_one_line_error_with_exit_2(result_json, tmp_path):
                                        str(tmp_path / "nope.ini")])
     assert res.exit_code == 2
     assert "no such INI file" in res.output and "Traceback" not in res.output
+
+
+def test_a_blending_program_is_predicted_as_exact_stop_with_a_warning(result_json, tmp_path):
+    prog = tmp_path / "blend.ngc"
+    prog.write_text("G21 G90 G17 G94\nG64 P0.01 (blend)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
+    assert res.exit_code == 0, res.output
+    assert "warning: blend.ngc: G64 path blending is not modelled" in res.output
+    prog.write_text("G21 G90 G17 G94\nG61.1 (not G64)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
+    assert "G64" not in res.output
