@@ -7,9 +7,10 @@ predicted stand-alone by `agent predict PROGRAM --machine result.json --ini mach
 --against RECORDING`: the program planned here with LinuxCNC's per-axis limits from the
 INI and run on the identified drives, against the measured contour error over the same
 feed moves, and the program's run time; and the same with the path-limited planner (no
---ini), to show what planning with per-axis limits changes.  Programs: circle and diamond (20 mm) at 10 and
-100 mm/s, the ballbar test (`agent ballbar --program-out`: R 10 mm at 1000 mm/min, ccw
-and cw with 180° feed-in/out arcs, one program) and a small part (fixtures/linuxcnc/part.ngc).
+--ini), to show what planning with per-axis limits changes.  Programs: circle and diamond
+(20 mm) at 10 and 100 mm/s, the diamond at 100 mm/s blended (G64 P0.01 and P0.1), the
+ballbar test (`agent ballbar --program-out`: R 10 mm at 1000 mm/min, ccw and cw with 180°
+feed-in/out arcs, one program) and a small part (fixtures/linuxcnc/part.ngc).
 Every run starts with the machine switched off and on (the loop's state at zero, the
 state the prediction assumes).  Targets: max within 5 %, rms of the difference <= 10 % of
 the measured rms, cycle time within 1 %.  One run each; LinuxCNC runs in real time, so the
@@ -84,6 +85,13 @@ def main() -> int:
                 agent("generate", "--toolpath", kind, "--size", 20, "--feed", feed, "--dialect", "linuxcnc",
                       "-o", work / f"{kind}{feed}")
                 cases.append((f"{kind} {feed} mm/s", work / f"{kind}{feed}" / f"{kind}.ngc", f"{kind}{feed}"))
+        # blended (G64 P): the generator's P0.01 and a copy with P0.1
+        agent("generate", "--toolpath", "diamond", "--size", 20, "--feed", 100, "--dialect", "linuxcnc", "--blending",
+              "-o", work / "blend")
+        text = (work / "blend/diamond.ngc").read_text()
+        (work / "blend/diamond_p01.ngc").write_text(text.replace("G64 P0.01", "G64 P0.1"))
+        cases.append(("diamond 100 mm/s G64 P0.01", work / "blend/diamond.ngc", "blend001"))
+        cases.append(("diamond 100 mm/s G64 P0.1", work / "blend/diamond_p01.ngc", "blend01"))
         agent("ballbar", "--machine", work / "result.json", "--ini", ini, "--radius", 10, "--feed", 1000 / 60,
               "--program-out", work / "ballbar.ngc")
         cases.append(("ballbar ccw+cw R10 1000 mm/min", work / "ballbar.ngc", "ballbar"))

@@ -33,6 +33,12 @@ Model (the interpolator the thesis's identification experiment assumes, §3.3-3.
   the centripetal v²/r stays <= 0.866·a (LinuxCNC's BLEND_ACC_RATIO_NORMAL); the tangential
   acceleration is sqrt(a² − (v_l²/r)²) with v_l the arc's speed *limit* (not its feed; half
   of a when v_l is cut: LinuxCNC 2.9's ``pmCircleActualMaxVel`` on the segment's maxvel).
+* **G64 P blending** (with ``axis_limits``; the path mode read from the program's text,
+  :mod:`gcode_gen.path_mode`): consecutive G1 lines under G64 P run as one chain through
+  tangent arcs at the corners whose middle passes P from the corner, at the speed the
+  normal acceleration allows there, as LinuxCNC 2.9's tangent-arc blends (:func:`_blend`);
+  a move under G64 that ends without a blend runs at half its acceleration (LinuxCNC's
+  "parabolic" end condition).
 * **Blending** (``blending=True``, the G64 idea restricted to what keeps the limits exact):
   consecutive linear blocks with the same direction and feed are run as one move, without
   stopping in between; any corner, reversal, feed change, arc or dwell still stops.
@@ -51,6 +57,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from core.errors import InputError
+from gcode_gen.path_mode import path_tolerances
 from gcode_gen.program import Block, Program
 
 __all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile",
@@ -200,6 +207,8 @@ class _Segment:
     dwell_s: float = 0.0
     motion: str = ""
     feed: float = 0.0
+    tolerance: float = 0.0  # G64 P in force (LinuxCNC planner): blend into the next line within it
+    pieces: list | None = None  # a blended chain: [(kind, L, vmax, a, geometry, line)], see _chain
 
 
 def _check(Ts: float, a_max: float, j_max: float | None, rapid_feed: float) -> None:
@@ -226,6 +235,7 @@ def _line_limits(d: np.ndarray, vmax: np.ndarray | None, amax: np.ndarray | None
 def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, rapid_feed: float, blending: bool,
               axis_limits: AxisLimits | None = None) -> list[_Segment]:
     index = {ax: i for i, ax in enumerate(names)}
+    tolerances = path_tolerances(program.text or "") if axis_limits else {}
     vmax = amax = None
     if axis_limits:
         vmax = np.array([axis_limits[ax][0] if ax in axis_limits else math.inf for ax in names])
@@ -269,9 +279,138 @@ def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, r
                 prev.lines.append(b.line)
                 prev.breaks.append(prev.L)
             else:
-                segs.append(_Segment("line", p.copy(), q.copy(), L, feed, a_line, [b.line], [L], motion=b.motion, feed=feed))
+                segs.append(_Segment("line", p.copy(), q.copy(), L, feed, a_line, [b.line], [L], motion=b.motion, feed=feed,
+                                     tolerance=float(tolerances.get(b.line) or 0.0)))
         p = q
+    if vmax is not None:
+        segs = _blend(segs, names, amax)
     return segs
+
+
+def _blend(segs: list[_Segment], names: list[str], amax: np.ndarray) -> list[_Segment]:
+    """Consecutive G1 lines under G64 P (tolerance > 0) run as one blended chain (LinuxCNC's
+    tangent-arc blends): at each corner an arc tangent to both lines whose midpoint is
+    ``tolerance`` from the corner, R = P·sinθ/(1 − sinθ) (θ half the corner's interior angle),
+    its tangent points at most half a line from the corner; the speed on it
+    min(feed, sqrt(0.866·a·R)) with a the smallest acceleration of the axes either line moves;
+    the lines accelerate and decelerate at their per-axis limits between the arcs."""
+    out: list[_Segment] = []
+    for sg in segs:
+        prev = out[-1] if out else None
+        chainable = sg.kind == "line" and sg.motion == "G1"
+        if (chainable and prev is not None and prev.kind in ("line", "chain") and prev.motion == "G1"
+                and prev.tolerance > 0 and np.allclose(prev.p1, sg.p0)):
+            if prev.kind == "line":
+                prev = out[-1] = _Segment("chain", prev.p0, prev.p1, prev.L, prev.v, prev.a, list(prev.lines),
+                                          list(prev.breaks), motion="G1", feed=prev.feed, tolerance=prev.tolerance,
+                                          pieces=[("line", prev.L, prev.v, prev.a, (prev.p0.copy(), prev.p1.copy()),
+                                                   prev.lines[0])])
+            _append_blended(prev, sg, amax)
+            continue
+        out.append(sg)
+    for sg in out:
+        # Under G64 a move that ends without a blend into the next one (its end condition stays
+        # LinuxCNC's "parabolic") runs at half its acceleration (tp's tpGetScaledAccel).
+        if sg.kind == "line" and sg.tolerance > 0:
+            sg.a *= 0.5
+        elif sg.kind == "chain" and sg.tolerance > 0:
+            kind, L, v, a, geom, line = sg.pieces[-1]
+            sg.pieces[-1] = (kind, L, v, 0.5 * a, geom, line)
+    return out
+
+
+def _append_blended(chain: _Segment, sg: _Segment, amax: np.ndarray) -> None:
+    """Add line ``sg`` to ``chain`` through a blend arc at their common corner (see :func:`_blend`)."""
+    kind, L0, v0, a0, (A, C), line0 = chain.pieces[-1]
+    u1 = (C - A) / L0
+    u2 = (sg.p1 - sg.p0) / sg.L
+    interior = math.acos(max(-1.0, min(1.0, float(np.dot(-u1, u2)))))
+    theta = 0.5 * interior
+    tol = chain.tolerance
+    if interior > math.pi - 1e-9:  # straight on: no arc
+        d = R = 0.0
+    elif interior < 1e-6:  # a reversal cannot be blended
+        d = R = 0.0
+    else:
+        R = tol * math.sin(theta) / (1.0 - math.sin(theta))
+        d = min(R / math.tan(theta), 0.5 * L0, 0.5 * sg.L)
+        R = d * math.tan(theta)
+    moving = (np.abs(u1) > 1e-12) | (np.abs(u2) > 1e-12)
+    a_arc = float(np.min(amax[moving]))
+    if R > 0:
+        v_b = min(v0, sg.v, math.sqrt(ARC_NORMAL_RATIO_LINUXCNC * a_arc * R))
+        chain.pieces[-1] = (kind, L0 - d, v0, a0, (A, C - u1 * d), line0)
+        w = u2 - u1
+        centre = C + w / np.linalg.norm(w) * (R / math.sin(theta))
+        turn = math.pi - interior
+        chain.pieces.append(("arc", R * turn, v_b, 0.5 * a_arc, (centre, C - u1 * d, u1, R, turn), sg.lines[0]))
+    elif interior < 1e-6:
+        chain.pieces.append(("stop", 0.0, 0.0, a_arc, (C,), sg.lines[0]))
+    chain.pieces.append(("line", sg.L - d, sg.v, sg.a, (sg.p0 + u2 * d, sg.p1.copy()), sg.lines[0]))
+    chain.p1 = sg.p1.copy()
+    chain.L += sg.L
+    chain.lines.append(sg.lines[0])
+    chain.breaks.append(chain.L)
+    chain.tolerance = sg.tolerance
+
+
+def _chain_profile(pieces: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per piece (v_start, v_peak, v_end, duration): trapezoids joined at the speeds each
+    boundary allows (the smaller of its pieces' speed limits), lowered where a piece is too
+    short to reach the next boundary's speed (forward and backward passes); rest at both ends."""
+    n = len(pieces)
+    L = np.array([p[1] for p in pieces])
+    vmax = np.array([p[2] for p in pieces])
+    a = np.array([p[3] for p in pieces])
+    w = np.zeros(n + 1)
+    w[1:-1] = np.minimum(vmax[:-1], vmax[1:])
+    for k in range(n):  # forward
+        w[k + 1] = min(w[k + 1], math.sqrt(w[k] ** 2 + 2 * a[k] * L[k]))
+    for k in range(n - 1, -1, -1):  # backward
+        w[k] = min(w[k], math.sqrt(w[k + 1] ** 2 + 2 * a[k] * L[k]))
+    vp = np.minimum(vmax, np.sqrt(a * L + 0.5 * (w[:-1] ** 2 + w[1:] ** 2)))
+    vp = np.maximum(vp, np.maximum(w[:-1], w[1:]))
+    d_acc = (vp ** 2 - w[:-1] ** 2) / (2 * a)
+    d_dec = (vp ** 2 - w[1:] ** 2) / (2 * a)
+    cruise = np.where(vp > 0, np.maximum(L - d_acc - d_dec, 0.0) / np.maximum(vp, 1e-300), 0.0)
+    T = (vp - w[:-1]) / a + (vp - w[1:]) / a + cruise
+    return w[:-1], vp, w[1:], T
+
+
+def _chain_positions(sg: _Segment, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (axes, n) at τ = T·k/n, k = 1…n, and the program line of each sample, of a chain."""
+    v0, vp, v1, Tp = _chain_profile(sg.pieces)
+    T = float(Tp.sum())
+    tau = T * np.arange(1, n + 1) / n
+    start = np.concatenate([[0.0], np.cumsum(Tp)[:-1]])
+    which = np.clip(np.searchsorted(start, tau, side="right") - 1, 0, len(sg.pieces) - 1)
+    pos = np.empty((len(sg.p0), n))
+    line = np.empty(n, dtype=np.int64)
+    for i, (kind, L, _vmax, a, geom, ln) in enumerate(sg.pieces):
+        k = which == i
+        if not k.any():
+            continue
+        t = np.clip(tau[k] - start[i], 0.0, Tp[i])
+        ta, td = (vp[i] - v0[i]) / a, (vp[i] - v1[i]) / a
+        tc = Tp[i] - ta - td
+        s_acc = v0[i] * np.minimum(t, ta) + 0.5 * a * np.minimum(t, ta) ** 2
+        s_cru = vp[i] * np.clip(t - ta, 0.0, tc)
+        t3 = np.clip(t - ta - tc, 0.0, td)
+        s = np.minimum(s_acc + s_cru + vp[i] * t3 - 0.5 * a * t3 ** 2, L)
+        line[k] = ln
+        if kind == "line":
+            A, B = geom
+            u = s / L if L > 0 else np.ones_like(s)
+            pos[:, k] = B[:, None] - (1.0 - u)[None, :] * (B - A)[:, None]
+        elif kind == "arc":
+            centre, S, tangent, R, turn = geom
+            psi = s / R
+            e1 = (S - centre) / R
+            pos[:, k] = centre[:, None] + R * (np.cos(psi)[None, :] * e1[:, None] + np.sin(psi)[None, :] * tangent[:, None])
+        else:
+            pos[:, k] = geom[0][:, None]
+    pos[:, -1] = sg.p1
+    return pos, line
 
 
 def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], feed: float, a_max: float,
@@ -370,6 +509,11 @@ def interpolate(
         if sg.kind == "dwell":
             n[i] = math.ceil(sg.dwell_s / Ts - 1e-9) if sg.dwell_s > 0 else 0
             continue
+        if sg.kind == "chain":
+            T[i] = float(_chain_profile(sg.pieces)[3].sum())
+            n[i] = max(1, math.ceil(T[i] / Ts - 1e-9))
+            par["L"][i] = par["vp"][i] = par["ap"][i] = 1.0  # not evaluated: _chain_positions
+            continue
         prof = plan_profile(sg.L, sg.v, sg.a, j_max)
         T[i] = prof.T
         n[i] = max(1, math.ceil(prof.T / Ts - 1e-9))
@@ -393,6 +537,9 @@ def interpolate(
         if sg.kind == "dwell":
             pos[:, sl] = sg.p0[:, None]
             line_of[sl] = sg.lines[0]
+            continue
+        if sg.kind == "chain":
+            pos[:, sl], line_of[sl] = _chain_positions(sg, int(n[i]))
             continue
         si = np.clip(s[sl], 0.0, sg.L)
         u = si / sg.L

@@ -21,7 +21,6 @@ prediction.  The cycle time is the program's run time: first to last moving comm
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -30,6 +29,7 @@ import numpy as np
 
 from core.recording import Recording
 from gcode_gen.commands import CommandedRun, ProgramLike
+from gcode_gen.path_mode import path_tolerances
 from ident.contour import path_contour_error
 from ident.virtual_machine import Prediction, VirtualMachine
 
@@ -199,10 +199,12 @@ def block_of_samples(run: CommandedRun, commanded: dict[str, np.ndarray],
     """
     axes = list(commanded)
     X = np.column_stack([commanded[a] for a in axes])
-    ends, lines, moves = [], [], []
+    ends, lines, moves, tols = [], [], [], []
     pos = np.array([run.commanded[a][0] if a in run.commanded else 0.0 for a in axes])
     for p, blocks in enumerate(run.blocks):
+        blend = path_tolerances(run.texts[p]) if p < len(run.texts) else {}
         for line, b in sorted(blocks.items()):
+            tols.append(tol + float(blend.get(line) or 0.0))  # a blended corner is passed within G64 P
             q = pos.copy()
             for a, v in b.target.items():
                 if a in axes:
@@ -221,7 +223,7 @@ def block_of_samples(run: CommandedRun, commanded: dict[str, np.ndarray],
             break
         seg[k], line[k] = lines[k_block]
         dist = float(np.linalg.norm(X[k] - ends[k_block]))
-        near = dist <= tol
+        near = dist <= tols[k_block]
         closest = k + 1 == len(X) or float(np.linalg.norm(X[k + 1] - ends[k_block])) >= dist
         if near and away and closest:
             k_block, away = k_block + 1, False
@@ -297,20 +299,18 @@ def analyse(pred: Prediction) -> PredictionSummary:
         cmax, crms = float(c.max()), float(np.sqrt(np.mean(contour[sel] ** 2)))
         worst = _worst_places(run, rec, c, sel, names)
     return PredictionSummary(pred.machine.name, tuple(axes), tracking, contour, feed, cmax, crms,
-                             tuple(worst or ()), tuple(pred.warnings) + tuple(_path_mode_warnings(run)), pred,
+                             tuple(worst or ()), tuple(pred.warnings) + tuple(_path_mode_warnings(run, pred.machine.planner_limits is not None)), pred,
                              cycle_time_s(run), pred.machine.planner)
 
 
-_G64 = re.compile(r"G0*64(?![.\d])", re.IGNORECASE)
-_COMMENT = re.compile(r"\([^)]*\)|;.*")
-
-
-def _path_mode_warnings(run: CommandedRun) -> list[str]:
-    """A program that blends (G64) is planned as exact stop: say so."""
+def _path_mode_warnings(run: CommandedRun, per_axis: bool) -> list[str]:
+    """Blending (G64) the planner does not model: say so."""
     out = []
     for info, text in zip(run.programs, run.texts):
-        if any(_G64.search(_COMMENT.sub("", ln).replace(" ", "")) for ln in text.splitlines()):
-            out.append(f"{info['name']}: G64 path blending is not modelled, every block is planned to end at rest "
+        modes = set(path_tolerances(text).values())
+        if None in modes or (not per_axis and any(m for m in modes)):
+            what = "G64 without P" if per_axis else "G64 path blending (modelled with --ini's per-axis planner)"
+            out.append(f"{info['name']}: {what} is not modelled, those blocks are planned to end at rest "
                        f"(G61.1): corners come out sharper and the cycle time longer than the controller's")
     return out
 
@@ -382,9 +382,12 @@ def _standalone(machine: VirtualMachine, run: CommandedRun, axes: list[str], mea
     cmd = {a: run.commanded[a] for a in axes}
     sim = {a: machine.axes[a].simulate(cmd[a], segment=run.segment) for a in axes}
     own = contour_of_run(run, cmd, sim)
-    own_mask = _feed_moves(run)
+    # the planned samples assigned to blocks as the recorded ones are (a blended corner's
+    # arc splits where it comes nearest the corner)
+    own_labels = block_of_samples(run, cmd)
+    own_mask = _feed_moves(run, cmd, own_labels)
     key_m = labels[0] * 1_000_000 + labels[1]
-    key_p = run.segment.astype(np.int64) * 1_000_000 + run.line
+    key_p = own_labels[0] * 1_000_000 + own_labels[1]
     m_parts, p_parts = [], []
     for key in dict.fromkeys(key_p[own_mask]):
         km = np.flatnonzero(mask & (key_m == key))

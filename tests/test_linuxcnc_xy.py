@@ -65,14 +65,18 @@ def identified(tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["circle", "diamond"])
-def test_a_contour_is_predicted_stand_alone_as_linuxcnc_runs_it(identified, kind):
-    """At 100 mm/s (the diamond's sides accelerate at 2828 mm/s², each axis at its 2000):
-    max contour error within 5 %, rms of the difference <= 10 % of the measured rms, and the
-    program's run time within 1 %."""
+@pytest.mark.parametrize("kind, blending", [("circle", False), ("diamond", False), ("diamond", True)],
+                         ids=["circle", "diamond", "diamond-G64-P0.01"])
+def test_a_contour_is_predicted_stand_alone_as_linuxcnc_runs_it(identified, kind, blending):
+    """At 100 mm/s (the diamond's sides accelerate at 2828 mm/s², each axis at its 2000; blended,
+    its corners are arcs through the G64 tolerance): max contour error within 5 %, rms of the
+    difference <= 10 % of the measured rms, and the program's run time within 1 %."""
     m, work = identified
-    _agent("generate", "--toolpath", kind, "--size", 20, "--feed", 100, "--dialect", "linuxcnc", "-o", work / kind)
-    prog = work / kind / f"{kind}.ngc"
+    out = work / (kind + ("-blend" if blending else ""))
+    _agent("generate", "--toolpath", kind, "--size", 20, "--feed", 100, "--dialect", "linuxcnc", "-o", out,
+           *(["--blending"] if blending else []))
+    prog = out / f"{kind}.ngc"
+    kind = out.name
     res = lx.capture_run(m, [prog], work / f"{kind}.mcap", port=PORT)
     assert res.returncode == 0, res.stderr
     out = _agent("predict", prog, "--machine", work / "result.json", "--ini", m.run_dir / "machine.ini",

@@ -119,12 +119,38 @@ def test_a_bad_ini_is_a_one_line_error_with_exit_2(result_json, tmp_path):
     assert "no such INI file" in res.output and "Traceback" not in res.output
 
 
-def test_a_blending_program_is_predicted_as_exact_stop_with_a_warning(result_json, tmp_path):
+def test_blending_the_planner_does_not_model_is_predicted_as_exact_stop_with_a_warning(result_json, tmp_path):
     prog = tmp_path / "blend.ngc"
+    ini = ["--ini", str(ROOT / "fixtures/linuxcnc/machine.ini")]
     prog.write_text("G21 G90 G17 G94\nG64 P0.01 (blend)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
     res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
     assert res.exit_code == 0, res.output
-    assert "warning: blend.ngc: G64 path blending is not modelled" in res.output
+    assert "warning: blend.ngc: G64 path blending (modelled with --ini's per-axis planner) is not modelled" in res.output
+    assert "G64" not in CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), *ini]).output
+    prog.write_text("G21 G90 G17 G94\nG64 (no tolerance)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), *ini])
+    assert "warning: blend.ngc: G64 without P is not modelled" in res.output
     prog.write_text("G21 G90 G17 G94\nG61.1 (not G64)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
     res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
     assert "G64" not in res.output
+
+
+@pytest.mark.parametrize("P", [0.01, 0.1])
+def test_g64_p_blends_a_corner_with_an_arc_through_the_tolerance(P):
+    """LinuxCNC's tangent-arc blend at a 90° corner: the path passes P from the corner, on an
+    arc of R = P·sin45°/(1 − sin45°) run at sqrt(0.866·a·R), the lines at their per-axis limits."""
+    prog = parse_program(f"G21 G90 G17 G94\nG64 P{P}\nG0 X10 Y0\nG1 X0 Y10 F6000\nG1 X-10 Y0\nG1 X0 Y-10\nM2\n",
+                         name="d.ngc")
+    tr = interpolate(prog, axis_limits=LIMITS, rapid_feed=200.0, start={"X": 10.0, "Y": 0.0})
+    x, y = tr.axes["X"], tr.axes["Y"]
+    d = np.hypot(x - 0.0, y - 10.0)
+    k = int(np.argmin(d))
+    assert P - 1e-6 <= d[k] <= 1.1 * P  # the nearest sample, within half a period of the arc's middle
+    R = P * math.sin(math.pi / 4) / (1 - math.sin(math.pi / 4))
+    v = np.hypot(np.diff(x), np.diff(y)) / tr.Ts
+    assert v[k] == pytest.approx(math.sqrt(0.866 * 2000.0 * R), rel=0.03)
+    assert v.max() == pytest.approx(100.0, rel=5e-3)
+    assert (x[-1], y[-1]) == (0.0, -10.0)
+    # the last line ends without a blend: LinuxCNC runs it at half its acceleration (2828/2)
+    acc = np.diff(v[-60:]) / tr.Ts
+    assert acc.min() == pytest.approx(-1414.0, rel=0.03)
