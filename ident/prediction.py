@@ -306,10 +306,13 @@ def analyse(pred: Prediction) -> PredictionSummary:
 def _path_mode_warnings(run: CommandedRun, per_axis: bool) -> list[str]:
     """Blending (G64) the planner does not model: say so."""
     out = []
-    for info, text in zip(run.programs, run.texts):
-        modes = set(path_tolerances(text).values())
-        if None in modes or (not per_axis and any(m for m in modes)):
-            what = "G64 without P" if per_axis else "G64 path blending (modelled with --ini's per-axis planner)"
+    for info, text, blocks in zip(run.programs, run.texts, run.blocks):
+        tol = path_tolerances(text)
+        modes = set(tol.values())
+        arcs = any(b.motion in ("G2", "G3") and tol.get(line) != 0.0 for line, b in blocks.items())
+        if None in modes or (not per_axis and any(m for m in modes)) or (per_axis and arcs):
+            what = ("G64 path blending (modelled with --ini's per-axis planner)" if not per_axis
+                    else "G64 without P" if None in modes else "blending into or out of an arc under G64")
             out.append(f"{info['name']}: {what} is not modelled, those blocks are planned to end at rest "
                        f"(G61.1): corners come out sharper and the cycle time longer than the controller's")
     return out

@@ -130,6 +130,9 @@ def test_blending_the_planner_does_not_model_is_predicted_as_exact_stop_with_a_w
     prog.write_text("G21 G90 G17 G94\nG64 (no tolerance)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
     res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), *ini])
     assert "warning: blend.ngc: G64 without P is not modelled" in res.output
+    prog.write_text("G21 G90 G17 G94\nG64 P0.01\nG0 X0 Y0\nG1 X10 Y0 F3000\nG3 X10 Y10 I0 J5\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), *ini])
+    assert "warning: blend.ngc: blending into or out of an arc under G64 is not modelled" in res.output
     prog.write_text("G21 G90 G17 G94\nG61.1 (not G64)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
     res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
     assert "G64" not in res.output
