@@ -118,16 +118,19 @@ def command_programs(
     rapid_feed: float = 200.0,
     settle_s: float = SETTLE_S,
     machine_name: str = "the machine",
+    axis_limits: "dict[str, tuple[float, float]] | None" = None,
+    start: "dict[str, float] | None" = None,
 ) -> CommandedRun:
     """Interpolate ``programs`` in order on a machine with ``axes`` and these limits.
 
-    Every axis starts at 0 mm.  Raises :class:`MachineError` (naming program and line)
+    ``axis_limits`` (axis -> max velocity, max acceleration) plans with per-axis limits
+    (:func:`gcode_gen.interpolator.interpolate`).  Every axis starts at ``start`` (default 0 mm).  Raises :class:`MachineError` (naming program and line)
     when a block moves an axis the machine does not have, and :class:`InputError` when
     the programs move no axis.
     """
     if not programs:
         raise InputError("no program given")
-    start = {a: 0.0 for a in axes}
+    start = {a: float((start or {}).get(a, 0.0)) for a in axes}
     parts: list[dict[str, np.ndarray]] = []
     segments, lines, info, texts, blocks = [], [], [], [], []
     moved: set[str] = set()
@@ -143,7 +146,8 @@ def command_programs(
                 raise MachineError(f"{name}:{block.line}: moves axis {sorted(unknown)[0]}, "
                                    f"{machine_name} has axes {', '.join(axes)}")
             moved |= set(block.target)
-        traj = interpolate(program, Ts=Ts, a_max=a_max, j_max=j_max, rapid_feed=rapid_feed, start=dict(start))
+        traj = interpolate(program, Ts=Ts, a_max=a_max, j_max=j_max, rapid_feed=rapid_feed, start=dict(start),
+                           axis_limits=axis_limits)
         part = {}
         for a in axes:
             x = np.asarray(traj.axes.get(a, np.full(traj.t.shape, start[a])), dtype=float)

@@ -24,6 +24,21 @@ Model (the interpolator the thesis's identification experiment assumes, §3.3-3.
   lowered so the centripetal acceleration v²/r stays <= a_max/√2, and the tangential
   acceleration is limited to sqrt(a_max² - (v²/r)²), so the total acceleration vector stays
   <= a_max.  The jerk limit (if any) applies along the path only.
+* **Per-axis limits** (``axis_limits``, LinuxCNC's planner): instead of one path
+  acceleration, each axis has its own maximum velocity and acceleration (LinuxCNC INI
+  ``[AXIS_x]``/``[JOINT_n]`` MAX_VELOCITY/MAX_ACCELERATION).  A line with unit direction u
+  runs at path speed <= min_i v_i/|u_i| and path acceleration <= min_i a_i/|u_i| (as
+  LinuxCNC's canon computes them: 2000 mm/s² per axis is 2828 mm/s² along a 45° line).  An
+  arc in the XY plane takes a = min(a_X, a_Y) and v <= min(v_X, v_Y), the speed lowered so
+  the centripetal v²/r stays <= 0.866·a (LinuxCNC's BLEND_ACC_RATIO_NORMAL); the tangential
+  acceleration is sqrt(a² − (v_l²/r)²) with v_l the arc's speed *limit* (not its feed; half
+  of a when v_l is cut: LinuxCNC 2.9's ``pmCircleActualMaxVel`` on the segment's maxvel).
+* **G64 P blending** (with ``axis_limits``; the path mode read from the program's text,
+  :mod:`gcode_gen.path_mode`): consecutive G1 lines under G64 P run as one chain through
+  tangent arcs at the corners whose middle passes P from the corner, at the speed the
+  normal acceleration allows there, as LinuxCNC 2.9's tangent-arc blends (:func:`_blend`);
+  a move under G64 that ends without a blend runs at half its acceleration (LinuxCNC's
+  "parabolic" end condition).
 * **Blending** (``blending=True``, the G64 idea restricted to what keeps the limits exact):
   consecutive linear blocks with the same direction and feed are run as one move, without
   stopping in between; any corner, reversal, feed change, arc or dwell still stops.
@@ -37,15 +52,25 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
 from core.errors import InputError
 from core.run_limits import check_run_size
+from gcode_gen.path_mode import path_tolerances
 from gcode_gen.program import Block, Program
 
-__all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile"]
+__all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile",
+           "AxisLimits", "ARC_NORMAL_RATIO_PATH", "ARC_NORMAL_RATIO_LINUXCNC"]
+
+#: Centripetal share of the acceleration limit on an arc: the path-limited interpolator's.
+ARC_NORMAL_RATIO_PATH = 1.0 / math.sqrt(2.0)
+#: ... and LinuxCNC's (tp's BLEND_ACC_RATIO_NORMAL, used with per-axis limits).
+ARC_NORMAL_RATIO_LINUXCNC = 0.8660
+
+#: Per-axis limits: axis letter -> (maximum velocity mm/s, maximum acceleration mm/s²).
+AxisLimits = Mapping[str, "tuple[float, float]"]
 
 
 @dataclass(frozen=True)
@@ -183,6 +208,8 @@ class _Segment:
     dwell_s: float = 0.0
     motion: str = ""
     feed: float = 0.0
+    tolerance: float = 0.0  # G64 P in force (LinuxCNC planner): blend into the next line within it
+    pieces: list | None = None  # a blended chain: [(kind, L, vmax, a, geometry, line)], see _chain
 
 
 def _check(Ts: float, a_max: float, j_max: float | None, rapid_feed: float) -> None:
@@ -193,8 +220,27 @@ def _check(Ts: float, a_max: float, j_max: float | None, rapid_feed: float) -> N
         raise InputError(f"j_max must be a positive number of mm/s³ or None, got {j_max}")
 
 
-def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, rapid_feed: float, blending: bool) -> list[_Segment]:
+def _line_limits(d: np.ndarray, vmax: np.ndarray | None, amax: np.ndarray | None, a_path: float) -> tuple[float, float]:
+    """(path speed cap, path acceleration) of a line of direction ``d`` (mm) under per-axis limits.
+
+    Each axis i moves |u_i| of the path: v <= v_i/|u_i|, a <= a_i/|u_i| (LinuxCNC's canon).
+    Without per-axis limits: no speed cap, the path acceleration ``a_path``.
+    """
+    if vmax is None:
+        return math.inf, a_path
+    u = np.abs(d) / float(np.linalg.norm(d))
+    moving = u > 1e-12
+    return float(np.min(vmax[moving] / u[moving])), float(np.min(amax[moving] / u[moving]))
+
+
+def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, rapid_feed: float, blending: bool,
+              axis_limits: AxisLimits | None = None) -> list[_Segment]:
     index = {ax: i for i, ax in enumerate(names)}
+    tolerances = path_tolerances(program.text or "") if axis_limits else {}
+    vmax = amax = None
+    if axis_limits:
+        vmax = np.array([axis_limits[ax][0] if ax in axis_limits else math.inf for ax in names])
+        amax = np.array([axis_limits[ax][1] if ax in axis_limits else math.inf for ax in names])
     segs: list[_Segment] = []
     for b in program.blocks:
         if b.motion == "G4":
@@ -208,14 +254,23 @@ def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, r
         else:
             if b.feed is None or not b.feed > 0:
                 raise InputError(f"line {b.line}: {b.motion} block without a positive feed")
-            feed = float(b.feed)
+            # LinuxCNC: the rapid speed is the path speed cap, feeds above it are lowered to it
+            feed = float(b.feed) if vmax is None else min(float(b.feed), rapid_feed)
         if b.motion in ("G2", "G3"):
-            segs.append(_arc_segment(b, p, q, index, feed, a_max))
+            if vmax is None:
+                segs.append(_arc_segment(b, p, q, index, feed, a_max))
+            else:
+                plane = [index[a] for a in ("X", "Y") if a in index]
+                v_limit = min(float(np.min(vmax[plane])), rapid_feed)
+                segs.append(_arc_segment(b, p, q, index, min(feed, v_limit), float(np.min(amax[plane])),
+                                         ARC_NORMAL_RATIO_LINUXCNC, v_limit))
         else:
             L = float(np.linalg.norm(q - p))
             if L <= 1e-12:
                 p = q
                 continue
+            v_cap, a_line = _line_limits(q - p, vmax, amax, a_max)
+            feed = min(feed, v_cap)
             prev = segs[-1] if segs else None
             if (blending and prev is not None and prev.kind == "line" and prev.motion == b.motion
                     and prev.feed == feed
@@ -225,12 +280,145 @@ def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, r
                 prev.lines.append(b.line)
                 prev.breaks.append(prev.L)
             else:
-                segs.append(_Segment("line", p.copy(), q.copy(), L, feed, a_max, [b.line], [L], motion=b.motion, feed=feed))
+                segs.append(_Segment("line", p.copy(), q.copy(), L, feed, a_line, [b.line], [L], motion=b.motion, feed=feed,
+                                     tolerance=float(tolerances.get(b.line) or 0.0)))
         p = q
+    if vmax is not None:
+        segs = _blend(segs, names, amax)
     return segs
 
 
-def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], feed: float, a_max: float) -> _Segment:
+def _blend(segs: list[_Segment], names: list[str], amax: np.ndarray) -> list[_Segment]:
+    """Consecutive G1 lines under G64 P (tolerance > 0) run as one blended chain (LinuxCNC's
+    tangent-arc blends): at each corner an arc tangent to both lines whose midpoint is
+    ``tolerance`` from the corner, R = P·sinθ/(1 − sinθ) (θ half the corner's interior angle),
+    its tangent points at most half a line from the corner; the speed on it
+    min(feed, sqrt(0.866·a·R)) with a the smallest acceleration of the axes either line moves;
+    the lines accelerate and decelerate at their per-axis limits between the arcs."""
+    out: list[_Segment] = []
+    for sg in segs:
+        prev = out[-1] if out else None
+        chainable = sg.kind == "line" and sg.motion == "G1"
+        if (chainable and prev is not None and prev.kind in ("line", "chain") and prev.motion == "G1"
+                and prev.tolerance > 0 and np.allclose(prev.p1, sg.p0)):
+            if prev.kind == "line":
+                prev = out[-1] = _Segment("chain", prev.p0, prev.p1, prev.L, prev.v, prev.a, list(prev.lines),
+                                          list(prev.breaks), motion="G1", feed=prev.feed, tolerance=prev.tolerance,
+                                          pieces=[("line", prev.L, prev.v, prev.a, (prev.p0.copy(), prev.p1.copy()),
+                                                   prev.lines[0])])
+            _append_blended(prev, sg, amax)
+            continue
+        out.append(sg)
+    for sg in out:
+        # Under G64 a move that ends without a blend into the next one (its end condition stays
+        # LinuxCNC's "parabolic") runs at half its acceleration (tp's tpGetScaledAccel).
+        if sg.kind == "line" and sg.tolerance > 0:
+            sg.a *= 0.5
+        elif sg.kind == "chain" and sg.tolerance > 0:
+            kind, L, v, a, geom, line = sg.pieces[-1]
+            sg.pieces[-1] = (kind, L, v, 0.5 * a, geom, line)
+    return out
+
+
+def _append_blended(chain: _Segment, sg: _Segment, amax: np.ndarray) -> None:
+    """Add line ``sg`` to ``chain`` through a blend arc at their common corner (see :func:`_blend`)."""
+    kind, L0, v0, a0, (A, C), line0 = chain.pieces[-1]
+    u1 = (C - A) / L0
+    u2 = (sg.p1 - sg.p0) / sg.L
+    interior = math.acos(max(-1.0, min(1.0, float(np.dot(-u1, u2)))))
+    theta = 0.5 * interior
+    tol = chain.tolerance
+    if interior > math.pi - 1e-9:  # straight on: no arc
+        d = R = 0.0
+    elif interior < 1e-6:  # a reversal cannot be blended
+        d = R = 0.0
+    else:
+        R = tol * math.sin(theta) / (1.0 - math.sin(theta))
+        d = min(R / math.tan(theta), 0.5 * L0, 0.5 * sg.L)
+        R = d * math.tan(theta)
+    moving = (np.abs(u1) > 1e-12) | (np.abs(u2) > 1e-12)
+    a_arc = float(np.min(amax[moving]))
+    if R > 0:
+        v_b = min(v0, sg.v, math.sqrt(ARC_NORMAL_RATIO_LINUXCNC * a_arc * R))
+        chain.pieces[-1] = (kind, L0 - d, v0, a0, (A, C - u1 * d), line0)
+        w = u2 - u1
+        centre = C + w / np.linalg.norm(w) * (R / math.sin(theta))
+        turn = math.pi - interior
+        chain.pieces.append(("arc", R * turn, v_b, 0.5 * a_arc, (centre, C - u1 * d, u1, R, turn), sg.lines[0]))
+    elif interior < 1e-6:
+        chain.pieces.append(("stop", 0.0, 0.0, a_arc, (C,), sg.lines[0]))
+    chain.pieces.append(("line", sg.L - d, sg.v, sg.a, (sg.p0 + u2 * d, sg.p1.copy()), sg.lines[0]))
+    chain.p1 = sg.p1.copy()
+    chain.L += sg.L
+    chain.lines.append(sg.lines[0])
+    chain.breaks.append(chain.L)
+    chain.tolerance = sg.tolerance
+
+
+def _chain_profile(pieces: list) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per piece (v_start, v_peak, v_end, duration): trapezoids joined at the speeds each
+    boundary allows (the smaller of its pieces' speed limits), lowered where a piece is too
+    short to reach the next boundary's speed (forward and backward passes); rest at both ends."""
+    n = len(pieces)
+    L = np.array([p[1] for p in pieces])
+    vmax = np.array([p[2] for p in pieces])
+    a = np.array([p[3] for p in pieces])
+    w = np.zeros(n + 1)
+    w[1:-1] = np.minimum(vmax[:-1], vmax[1:])
+    for k in range(n):  # forward
+        w[k + 1] = min(w[k + 1], math.sqrt(w[k] ** 2 + 2 * a[k] * L[k]))
+    for k in range(n - 1, -1, -1):  # backward
+        w[k] = min(w[k], math.sqrt(w[k + 1] ** 2 + 2 * a[k] * L[k]))
+    vp = np.minimum(vmax, np.sqrt(a * L + 0.5 * (w[:-1] ** 2 + w[1:] ** 2)))
+    vp = np.maximum(vp, np.maximum(w[:-1], w[1:]))
+    d_acc = (vp ** 2 - w[:-1] ** 2) / (2 * a)
+    d_dec = (vp ** 2 - w[1:] ** 2) / (2 * a)
+    cruise = np.where(vp > 0, np.maximum(L - d_acc - d_dec, 0.0) / np.maximum(vp, 1e-300), 0.0)
+    T = (vp - w[:-1]) / a + (vp - w[1:]) / a + cruise
+    return w[:-1], vp, w[1:], T
+
+
+def _chain_positions(sg: _Segment, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (axes, n) at τ = T·k/n, k = 1…n, and the program line of each sample, of a chain."""
+    v0, vp, v1, Tp = _chain_profile(sg.pieces)
+    T = float(Tp.sum())
+    tau = T * np.arange(1, n + 1) / n
+    start = np.concatenate([[0.0], np.cumsum(Tp)[:-1]])
+    which = np.clip(np.searchsorted(start, tau, side="right") - 1, 0, len(sg.pieces) - 1)
+    pos = np.empty((len(sg.p0), n))
+    line = np.empty(n, dtype=np.int64)
+    for i, (kind, L, _vmax, a, geom, ln) in enumerate(sg.pieces):
+        k = which == i
+        if not k.any():
+            continue
+        t = np.clip(tau[k] - start[i], 0.0, Tp[i])
+        ta, td = (vp[i] - v0[i]) / a, (vp[i] - v1[i]) / a
+        tc = Tp[i] - ta - td
+        s_acc = v0[i] * np.minimum(t, ta) + 0.5 * a * np.minimum(t, ta) ** 2
+        s_cru = vp[i] * np.clip(t - ta, 0.0, tc)
+        t3 = np.clip(t - ta - tc, 0.0, td)
+        s = np.minimum(s_acc + s_cru + vp[i] * t3 - 0.5 * a * t3 ** 2, L)
+        line[k] = ln
+        if kind == "line":
+            A, B = geom
+            u = s / L if L > 0 else np.ones_like(s)
+            pos[:, k] = B[:, None] - (1.0 - u)[None, :] * (B - A)[:, None]
+        elif kind == "arc":
+            centre, S, tangent, R, turn = geom
+            psi = s / R
+            e1 = (S - centre) / R
+            pos[:, k] = centre[:, None] + R * (np.cos(psi)[None, :] * e1[:, None] + np.sin(psi)[None, :] * tangent[:, None])
+        else:
+            pos[:, k] = geom[0][:, None]
+    pos[:, -1] = sg.p1
+    return pos, line
+
+
+def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], feed: float, a_max: float,
+                 normal_ratio: float = ARC_NORMAL_RATIO_PATH, v_limit: float | None = None) -> _Segment:
+    """An arc block; ``v_limit`` (LinuxCNC): the tangential acceleration is set for the arc's
+    speed limit, not its feed (tc's ``pmCircleActualMaxVel`` with the segment's maxvel),
+    so a feed override could raise the speed without exceeding the limits."""
     if b.center is None or "X" not in index or "Y" not in index:
         raise InputError(f"line {b.line}: arc without an XY centre")
     ix, iy = index["X"], index["Y"]
@@ -252,9 +440,10 @@ def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], 
     other[ix] = other[iy] = 0.0
     L = math.hypot(0.5 * (r0 + r1) * abs(dth), float(np.linalg.norm(other)))
     r = min(r0, r1)
-    # Centripetal v²/r <= a_max/√2; tangential limited so |a| stays <= a_max.
-    v = min(feed, math.sqrt(a_max * r / math.sqrt(2.0)))
-    an = v * v / r
+    # Centripetal v²/r <= normal_ratio·a_max; tangential limited so |a| stays <= a_max.
+    v_cut = math.sqrt(a_max * r * normal_ratio)
+    v = min(feed, v_cut)
+    an = min(v_limit, v_cut) ** 2 / r if v_limit is not None else v * v / r
     at = math.sqrt(max(a_max * a_max - an * an, 0.0))
     return _Segment("arc", p.copy(), q.copy(), L, v, at, [b.line], [L], arc=(cx, cy, r0, r1, th0, dth, ix, iy), motion=b.motion, feed=feed)
 
@@ -268,6 +457,7 @@ def interpolate(
     rapid_feed: float = 200.0,
     start: dict[str, float] | None = None,
     blending: bool = False,
+    axis_limits: AxisLimits | None = None,
 ) -> Trajectory:
     """Commanded trajectory of ``program`` sampled every ``Ts`` seconds.
 
@@ -288,6 +478,10 @@ def interpolate(
         the program commands for them (so the opening positioning move costs nothing).
     blending : bool
         Run consecutive same-direction, same-feed linear blocks without stopping.
+    axis_limits : dict or None
+        Axis letter -> (max velocity mm/s, max acceleration mm/s²): plan with per-axis
+        limits as LinuxCNC does (module docstring); ``a_max`` is then not used.  An axis
+        not named is unlimited.
 
     Returns
     -------
@@ -301,7 +495,11 @@ def interpolate(
         for ax, v in b.target.items():
             first.setdefault(ax, v)
     p0 = np.array([(start or {}).get(ax, first.get(ax, 0.0)) for ax in names], dtype=float)
-    segs = _segments(program, names, p0, a_max, rapid_feed, blending)
+    if axis_limits:
+        for ax, (v, a) in axis_limits.items():
+            if not (math.isfinite(v) and v > 0 and math.isfinite(a) and a > 0):
+                raise InputError(f"axis {ax}: limits must be positive numbers, got velocity {v}, acceleration {a}")
+    segs = _segments(program, names, p0, a_max, rapid_feed, blending, axis_limits)
 
     # Per segment: profile and number of samples on the Ts grid.
     n = np.zeros(len(segs), dtype=np.int64)
@@ -311,6 +509,11 @@ def interpolate(
     for i, sg in enumerate(segs):
         if sg.kind == "dwell":
             n[i] = math.ceil(sg.dwell_s / Ts - 1e-9) if sg.dwell_s > 0 else 0
+            continue
+        if sg.kind == "chain":
+            T[i] = float(_chain_profile(sg.pieces)[3].sum())
+            n[i] = max(1, math.ceil(T[i] / Ts - 1e-9))
+            par["L"][i] = par["vp"][i] = par["ap"][i] = 1.0  # not evaluated: _chain_positions
             continue
         prof = plan_profile(sg.L, sg.v, sg.a, j_max)
         T[i] = prof.T
@@ -336,6 +539,9 @@ def interpolate(
         if sg.kind == "dwell":
             pos[:, sl] = sg.p0[:, None]
             line_of[sl] = sg.lines[0]
+            continue
+        if sg.kind == "chain":
+            pos[:, sl], line_of[sl] = _chain_positions(sg, int(n[i]))
             continue
         si = np.clip(s[sl], 0.0, sg.L)
         u = si / sg.L

@@ -18,6 +18,9 @@ __all__ = ["contour_error", "path_contour_error", "TIME_WEIGHT"]
 #: large against contour errors for parts of the path visited seconds apart.
 TIME_WEIGHT = 0.5
 
+#: rad: a point this close to straight ahead of a vertex (or of the path's end) is on its left.
+AHEAD_RAD = 1e-3
+
 
 def contour_error(path_x: np.ndarray, path_y: np.ndarray, x: np.ndarray, y: np.ndarray,
                   window: int = 3) -> np.ndarray:
@@ -29,31 +32,37 @@ def contour_error(path_x: np.ndarray, path_y: np.ndarray, x: np.ndarray, y: np.n
     x, y : actual (or simulated) positions, mm, shape (N,).
     window : how many path segments either side of the nearest vertex are searched.
     """
-    P = np.column_stack([path_x, path_y]).astype(float)
-    Q = np.column_stack([x, y]).astype(float)
-    # Drop repeated vertices (standstill) so every segment has a direction.
-    keep = np.concatenate([[True], np.any(np.diff(P, axis=0) != 0, axis=1)])
-    P = P[keep]
-    if len(P) < 2:
-        return np.hypot(Q[:, 0] - P[0, 0], Q[:, 1] - P[0, 1])
-    from scipy.spatial import cKDTree  # lazy: 0.3 s of import every command would pay
+    return path_contour_error(np.column_stack([path_x, path_y]), np.column_stack([x, y]), window=window)
 
-    _, nearest = cKDTree(P).query(Q)
-    best = np.full(len(Q), np.inf)
-    signed = np.zeros(len(Q))
-    for off in range(-window, window):
-        i = np.clip(nearest + off, 0, len(P) - 2)
-        A, B = P[i], P[i + 1]
-        AB = B - A
-        L2 = np.einsum("ij,ij->i", AB, AB)
-        s = np.clip(np.einsum("ij,ij->i", Q - A, AB) / L2, 0.0, 1.0)
-        foot = A + s[:, None] * AB
-        d = np.hypot(*(Q - foot).T)
-        side = np.sign(AB[:, 0] * (Q - A)[:, 1] - AB[:, 1] * (Q - A)[:, 0])
-        better = d < best
-        best[better] = d[better]
-        signed[better] = (side * d)[better]
-    return signed
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=1, keepdims=True)
+    return np.divide(v, n, out=np.zeros_like(v), where=n > 0)
+
+
+def _side(P: np.ndarray, Q: np.ndarray, seg: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """+1 left of travel, −1 right, for points Q whose nearest path point is at ``s`` ∈ [0, 1] of chord ``seg``.
+
+    Inside a chord the side is that of its direction.  Where the nearest point is a vertex
+    (a corner, or a point beyond a chord's end on its extension, where the cross product
+    with that chord is 0 or a rounding error's sign), the side is taken against the mean
+    of the unit directions into and out of the vertex: the corner's bisector, so an
+    overshoot past a corner is outside it whichever chord is nearer.  A point straight
+    ahead of the path's last point (or behind its first) is on neither side: within
+    ``AHEAD_RAD`` of the tangent it counts as left (+), so a rounding error in its
+    position cannot flip the sign.
+    """
+    D = _unit(np.diff(P, axis=0))  # unit direction of each chord
+    at_vertex = (s <= 0.0) | (s >= 1.0)
+    v = np.where(s >= 1.0, seg + 1, seg)  # the vertex, where at_vertex
+    into = D[np.clip(v - 1, 0, len(D) - 1)] * (v >= 1)[:, None]
+    out = D[np.clip(v, 0, len(D) - 1)] * (v <= len(D) - 1)[:, None]
+    T = np.where(at_vertex[:, None], into + out, D[seg])
+    base = np.where(at_vertex[:, None], P[v], P[seg])
+    R = Q - base
+    cross = T[:, 0] * R[:, 1] - T[:, 1] * R[:, 0]
+    tol = AHEAD_RAD * np.linalg.norm(T, axis=1) * np.linalg.norm(R, axis=1)
+    return np.where(cross < -tol, -1.0, 1.0)
 
 
 def path_contour_error(commanded: np.ndarray, actual: np.ndarray, *, arcs: list[tuple[np.ndarray, float, float]] | None = None,
@@ -87,7 +96,7 @@ def path_contour_error(commanded: np.ndarray, actual: np.ndarray, *, arcs: list[
     Pk = P[idx]
     if len(Pk) < 2:
         return np.linalg.norm(Q - Pk[0], axis=1)
-    from scipy.spatial import cKDTree  # lazy, as above
+    from scipy.spatial import cKDTree  # lazy: 0.3 s of import every command would pay
 
     if t is None:
         _, nearest = cKDTree(Pk).query(Q)
@@ -96,7 +105,7 @@ def path_contour_error(commanded: np.ndarray, actual: np.ndarray, *, arcs: list[
         _, nearest = cKDTree(np.column_stack([Pk, tw[idx]])).query(np.column_stack([Q, tw]))
     best = np.full(len(Q), np.inf)
     seg = np.zeros(len(Q), dtype=np.int64)
-    signed = np.zeros(len(Q))
+    frac = np.zeros(len(Q))
     two = P.shape[1] == 2
     for off in range(-window, window):
         i = np.clip(nearest + off, 0, len(Pk) - 2)
@@ -105,11 +114,8 @@ def path_contour_error(commanded: np.ndarray, actual: np.ndarray, *, arcs: list[
         s = np.clip(np.einsum("ij,ij->i", Q - A, AB) / np.einsum("ij,ij->i", AB, AB), 0.0, 1.0)
         d = np.linalg.norm(Q - (A + s[:, None] * AB), axis=1)
         better = d < best
-        best[better], seg[better] = d[better], i[better]
-        if two:
-            side = np.sign(AB[:, 0] * (Q - A)[:, 1] - AB[:, 1] * (Q - A)[:, 0])
-            signed[better] = (side * d)[better]
-    out = signed if two else best
+        best[better], seg[better], frac[better] = d[better], i[better], s[better]
+    out = _side(Pk, Q, seg, frac) * best if two else best
     if arcs and arc_of_vertex is not None:
         # The end vertex of the nearest chord decides its block (its sample lies on the block).
         which = np.asarray(arc_of_vertex)[idx[seg + 1]]

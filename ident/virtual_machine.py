@@ -28,6 +28,7 @@ import numpy as np
 from core.errors import InputError, MachineError
 from core.recording import AxisTrace, Recording
 from gcode_gen.commands import CommandedRun, ProgramLike, command_programs
+from gcode_gen.planner_limits import PlannerLimits
 from ident.axis_model import AxisModel
 from ident.model_limits import check_runnable
 
@@ -76,6 +77,8 @@ class VirtualMachine:
     a_max, j_max, rapid_feed, max_feed : interpolator limits, mm/s², mm/s³ (None: none), mm/s, mm/s.
     identified_range : axis -> {"max_speed_mm_s", "travel_mm"} of the identification recording.
     travel : axis -> (lo, hi) travel limits, mm, where known (a program outside them is refused).
+    planner_limits : per-axis limits (LinuxCNC's planner, e.g. from its INI); None: the path
+        limits a_max / rapid_feed / max_feed.
     """
 
     name: str
@@ -86,6 +89,7 @@ class VirtualMachine:
     max_feed: float = INTERPOLATOR_DEFAULTS["max_feed_mm_s"]
     identified_range: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     travel: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    planner_limits: PlannerLimits | None = None
 
     def __post_init__(self) -> None:
         if not self.axes:
@@ -98,6 +102,20 @@ class VirtualMachine:
             v = getattr(self, attr)
             if not (math.isfinite(v) and v > 0):
                 raise MachineError(f"virtual machine {self.name!r}: {attr} must be > 0, got {v}")
+
+    @property
+    def planner(self) -> dict[str, Any]:
+        """Which planner and limits the programs are run with (for the words and the JSON)."""
+        if self.planner_limits is not None:
+            return {**self.planner_limits.to_dict(), "words": self.planner_limits.describe()}
+        return {"kind": "path", "source": "defaults", "a_max_mm_s2": self.a_max, "j_max_mm_s3": self.j_max,
+                "rapid_feed_mm_s": self.rapid_feed,
+                "words": f"path-limited planner ({self.a_max:g} mm/s² along the path, rapids {self.rapid_feed:g} mm/s; "
+                         f"give the controller's limits with --ini)"}
+
+    def with_planner_limits(self, limits: PlannerLimits) -> "VirtualMachine":
+        """A copy planning with per-axis ``limits`` (rapids at their path speed cap, which caps feeds too)."""
+        return replace(self, planner_limits=limits, rapid_feed=limits.max_linear_velocity or self.rapid_feed)
 
     @property
     def Ts(self) -> float:
@@ -123,10 +141,19 @@ class VirtualMachine:
         section = dict(doc.get("virtual_machine") or {})
         lim = {**INTERPOLATOR_DEFAULTS, **{k: v for k, v in section.items() if k in INTERPOLATOR_DEFAULTS}}
         travel = {str(a): (float(lo), float(hi)) for a, (lo, hi) in dict(section.get("travel_mm") or {}).items()}
-        return cls(name=name, axes=axes, a_max=float(lim["a_max_mm_s2"]),
-                   j_max=None if lim["j_max_mm_s3"] in (None, 0) else float(lim["j_max_mm_s3"]),
-                   rapid_feed=float(lim["rapid_feed_mm_s"]), max_feed=float(lim["max_feed_mm_s"]),
-                   identified_range=ranges, travel=travel)
+        vm = cls(name=name, axes=axes, a_max=float(lim["a_max_mm_s2"]),
+                 j_max=None if lim["j_max_mm_s3"] in (None, 0) else float(lim["j_max_mm_s3"]),
+                 rapid_feed=float(lim["rapid_feed_mm_s"]), max_feed=float(lim["max_feed_mm_s"]),
+                 identified_range=ranges, travel=travel)
+        if section.get("axis_limits"):
+            try:
+                per_axis = {str(a): (float(v["max_velocity_mm_s"]), float(v["max_acceleration_mm_s2"]))
+                            for a, v in dict(section["axis_limits"]).items()}
+            except (KeyError, TypeError, ValueError):
+                raise InputError(f"{name}: virtual_machine.axis_limits: per axis "
+                                 f"{{max_velocity_mm_s, max_acceleration_mm_s2}}") from None
+            vm = vm.with_planner_limits(PlannerLimits(per_axis, None, f"{name} virtual_machine.axis_limits"))
+        return vm
 
     def with_overrides(self, assignments: Sequence[str]) -> "VirtualMachine":
         """A copy with ``AXIS.PARAM=VALUE`` assignments applied (``X.a1=120``, ``Y.backlash.gap_mm=0.01``).
@@ -154,16 +181,19 @@ class VirtualMachine:
         return replace(self, axes=axes, name=self.name + suffix)
 
     # -- running ------------------------------------------------------------------------
-    def command(self, programs: Sequence[ProgramLike]) -> CommandedRun:
-        """The interpolated command of ``programs`` on this machine's axes and limits."""
+    def command(self, programs: Sequence[ProgramLike], start: Mapping[str, float] | None = None) -> CommandedRun:
+        """The interpolated command of ``programs`` on this machine's axes and limits, from
+        ``start`` (axis -> mm; default every axis at 0)."""
         run = command_programs(programs, list(self.axes), Ts=self.Ts, a_max=self.a_max, j_max=self.j_max,
-                               rapid_feed=self.rapid_feed, machine_name=self.name)
+                               start=dict(start or {}),
+                               rapid_feed=self.rapid_feed, machine_name=self.name,
+                               axis_limits=self.planner_limits.axes if self.planner_limits else None)
         self._check_limits(run)
         return run
 
-    def run(self, programs: Sequence[ProgramLike]) -> Prediction:
-        """Run ``programs`` in order and predict every moved axis (free run from the command)."""
-        run = self.command(programs)
+    def run(self, programs: Sequence[ProgramLike], start: Mapping[str, float] | None = None) -> Prediction:
+        """Run ``programs`` in order from ``start`` and predict every moved axis (free run from the command)."""
+        run = self.command(programs, start)
         axes = {a: AxisTrace(x, self.axes[a].simulate(x, segment=run.segment)) for a, x in run.commanded.items()}
         rec = Recording(
             t=run.t, axes=axes, sample_period=run.Ts, segment=run.segment,

@@ -1,8 +1,11 @@
 #!/usr/bin/env bash
-# TRANSPORT=linuxcnc bash scripts/demo.sh: the main job on a real LinuxCNC (the headless
-# test machine of fixtures/linuxcnc/: interpreter, task, planner, motion, pid, a HAL plant):
+# TRANSPORT=linuxcnc bash scripts/demo.sh: the main job on a real LinuxCNC (the two-axis
+# headless test machine of fixtures/linuxcnc/: interpreter, task, planner, motion, pid and
+# a HAL plant per axis, X and Y tuned differently):
 #   generate → run the programs on LinuxCNC while capturing over HAL (linuxcnc://) → a
-#   second run for validation → identify → report.  Results land in $OUT (runs/demo/).
+#   second run for validation → identify → report → a circle predicted on the identified
+#   drives with LinuxCNC's limits, then run on LinuxCNC: predicted vs measured.
+# Results land in $OUT (runs/demo/).
 # Called by scripts/demo.sh after it installed rapid-ident into .venv.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,12 +21,14 @@ if ! $PY $MACHINE check; then
 fi
 mkdir -p "$OUT/validation"
 
-echo "== 1. generate the identification programs and a second set for validation (LinuxCNC dialect)"
-$AGENT generate --axes X --dialect linuxcnc --seed 1 -o "$OUT"
-$AGENT generate --axes X --dialect linuxcnc --seed 2 -o "$OUT/validation"
+PORT='linuxcnc://?joints=0,1&axes=X,Y'
 
-echo "== 2. start the headless LinuxCNC machine (fixtures/linuxcnc/machine.ini)"
-RUN=$($PY $MACHINE start)
+echo "== 1. generate the identification programs and a second set for validation (LinuxCNC dialect)"
+$AGENT generate --axes X,Y --dialect linuxcnc --seed 1 --n-high 30 -o "$OUT"
+$AGENT generate --axes X,Y --dialect linuxcnc --seed 2 --n-high 30 -o "$OUT/validation"
+
+echo "== 2. start the headless two-axis LinuxCNC machine (fixtures/linuxcnc/machine.ini, X and Y)"
+RUN=$($PY $MACHINE start --axes XY)
 trap '$PY $MACHINE stop "$RUN" > /dev/null 2>&1 || true' EXIT
 
 # capture LOG while LinuxCNC runs the programs; the capture stops by itself at the program end
@@ -31,7 +36,7 @@ capture_run() {
   local log=$1 pid
   shift
   rm -f "$log"
-  $AGENT capture --port linuxcnc:// -o "$log" &
+  $AGENT capture --port "$PORT" -o "$log" &
   pid=$!
   while [ ! -e "$log" ]; do
     kill -0 $pid 2> /dev/null || { wait $pid; return 1; }
@@ -52,3 +57,11 @@ echo "== 5. identify, validate, diagnose and report"
 $AGENT identify "$OUT/capture.mcap" --validate "$OUT/validation.mcap" \
     --json "$OUT/result.json" --report "$OUT/report.html"
 echo "report: $OUT/report.html"
+
+echo "== 6. a 20 mm circle at 100 mm/s: predicted on the identified drives, planned with the INI's limits,"
+echo "      then run on LinuxCNC and captured: predicted vs measured contour error and cycle time"
+$AGENT generate --toolpath circle --size 20 --feed 100 --dialect linuxcnc -o "$OUT/circle"
+cp "$RUN/machine.ini" "$OUT/machine.ini"
+capture_run "$OUT/circle.mcap" "$OUT/circle/circle.ngc"
+$AGENT predict "$OUT/circle/circle.ngc" --machine "$OUT/result.json" --ini "$OUT/machine.ini" \
+    --against "$OUT/circle.mcap" --report "$OUT/circle.html"

@@ -1,9 +1,9 @@
 """The headless LinuxCNC test machine (fixtures/linuxcnc/) for the tests that capture from it.
 
 * :func:`require_linuxcnc` skips a test, with a one-line reason, where LinuxCNC is not
-  installed; :func:`machine` starts the machine with some [PLANT] overrides (one LinuxCNC
-  at a time on a computer: a machine with other overrides is stopped first) and stops it at
-  the end of the session;
+  installed; :func:`machine` starts the machine (X, or X and Y) with some [PLANT] overrides
+  (one LinuxCNC at a time on a computer: a machine with other axes or overrides is stopped
+  first) and stops it at the end of the session;
 * :func:`generate` writes identification programs with ``agent generate``;
 * :func:`capture_run` captures while the machine runs programs, as a user would:
   ``agent capture --port linuxcnc://…`` in the background, then the programs, then waits
@@ -37,14 +37,16 @@ def require_linuxcnc() -> None:
         pytest.skip(why)
 
 
-def machine(**overrides: float):
-    """The running test machine with these [PLANT] overrides (started, or restarted, as needed)."""
+def machine(axes: str = "X", **overrides: float):
+    """The running test machine with these axes (X or XY) and [PLANT] overrides (started, or
+    restarted, as needed)."""
     require_linuxcnc()
-    if _current["machine"] is not None and _current["overrides"] == overrides:
+    key = (axes, overrides)
+    if _current["machine"] is not None and _current["overrides"] == key:
         return _current["machine"]
     stop_machine()
-    m = lm.Machine(overrides).start()
-    _current.update(overrides=overrides, machine=m)
+    m = lm.Machine(overrides, axes=axes).start()
+    _current.update(overrides=key, machine=m)
     return m
 
 
@@ -58,9 +60,9 @@ def stop_machine() -> None:
 atexit.register(stop_machine)
 
 
-def generate(out: Path, seed: int, n_low: int = 200, n_high: int = 30) -> list[Path]:
-    """The low- and high-speed identification programs, LinuxCNC dialect (about 1.2 + 3.5 s)."""
-    subprocess.run(AGENT + ["generate", "--axes", "X", "--dialect", "linuxcnc", "--seed", str(seed),
+def generate(out: Path, seed: int, n_low: int = 200, n_high: int = 30, axes: str = "X") -> list[Path]:
+    """The low- and high-speed identification programs, LinuxCNC dialect (about 1.2 + 3.5 s per axis)."""
+    subprocess.run(AGENT + ["generate", "--axes", ",".join(axes), "--dialect", "linuxcnc", "--seed", str(seed),
                             "--n-low", str(n_low), "--n-high", str(n_high), "-o", str(out)],
                    check=True, capture_output=True, cwd=ROOT)
     return [out / "ident_low.ngc", out / "ident_high.ngc"]
@@ -115,11 +117,11 @@ def implied_model(plant: dict[str, float], gains: dict[str, float]) -> dict[str,
     }
 
 
-def pid_gains(m) -> dict[str, float]:
-    """[JOINT_0] P, I, D, FF1, FF2 of the running machine's INI."""
+def pid_gains(m, joint: int = 0) -> dict[str, float]:
+    """[JOINT_n] P, I, D, FF1, FF2 of the running machine's INI."""
     import configparser
 
     cp = configparser.ConfigParser(strict=False, interpolation=None)
     cp.optionxform = str
     cp.read(m.run_dir / "machine.ini")
-    return {k: float(cp["JOINT_0"][k]) for k in ("P", "I", "D", "FF1", "FF2")}
+    return {k: float(cp[f"JOINT_{joint}"][k]) for k in ("P", "I", "D", "FF1", "FF2")}

@@ -19,7 +19,13 @@ def ballbar(
     axes: str = typer.Option("X,Y", "--axes", help="The plane: two axis letters."),
     centre: str = typer.Option("0,0", "--centre", help="Circle centre in the plane, mm."),
     center: Optional[str] = typer.Option(None, "--center", hidden=True),  # the other spelling, kept working
-    against: List[Path] = typer.Option([], "--against", help="Recordings of the same test (ccw and cw): overlay measured."),
+    against: List[Path] = typer.Option([], "--against", help="Recordings of the same test (the whole test, or ccw "
+                                                            "and cw apart): overlay measured."),
+    ini: Optional[Path] = typer.Option(None, "--ini", help="The controller's LinuxCNC INI: plan with its per-axis limits."),
+    lead_deg: float = typer.Option(180.0, "--lead-deg", help="Feed-in and feed-out arcs either side of each 360° "
+                                                           "data arc, degrees."),
+    program_out: Optional[Path] = typer.Option(None, "--program-out", help="Write the test program (LinuxCNC "
+                                                                          "dialect) here, to run it on the machine."),
     report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
 ) -> None:
@@ -43,10 +49,19 @@ def ballbar(
     if len(c) != 2:
         raise InputError(f"--centre {centre!r}: two numbers, e.g. 0,0")
     recordings = [load_recording(p) for p in against]
-    tests = [run_ballbar(m, radius=radius, feed=feed, axes=plane, centre=c, against=recordings if i == 0 else ())
-             for i, m in enumerate(load_machines(machine, set_))]
-    for t in tests:
-        typer.echo(f"machine {t.machine}: ballbar R {radius:g} mm at {feed:g} mm/s")
+    machines = load_machines(machine, set_, ini)
+    if program_out is not None:
+        from gcode_gen.dialects import write
+        from ident.synthetic_ballbar import ballbar_program
+
+        program_out.write_text(write(ballbar_program(radius, feed, c, plane, lead_deg), "linuxcnc"))
+        typer.echo(f"wrote {program_out}")
+    tests = [run_ballbar(m, radius=radius, feed=feed, axes=plane, centre=c, against=recordings if i == 0 else (),
+                         lead_deg=lead_deg) for i, m in enumerate(machines)]
+    for m, t in zip(machines, tests):
+        typer.echo(f"machine {t.machine}: ballbar R {radius:g} mm at {feed:g} mm/s; {lead_deg:g}° feed-in/out arcs, "
+                   f"ccw then cw in one run from rest with the loop's state at zero")
+        typer.echo(f"  planner: {m.planner['words']}")
         for w in t.words():
             typer.echo(f"  {w}")
         if t.measured is not None:

@@ -14,6 +14,8 @@ def predict(
     set_: List[str] = typer.Option([], "--set", help="Override a parameter, AXIS.PARAM=VALUE (X.a1=120, "
                                                       "Y.backlash.gap_mm=0.01): a second machine to compare, repeatable."),
     against: List[Path] = typer.Option([], "--against", help="A recording of the same motion: measured vs predicted."),
+    ini: Optional[Path] = typer.Option(None, "--ini", help="The controller's LinuxCNC INI: plan with its per-axis "
+                                                            "MAX_VELOCITY/MAX_ACCELERATION as LinuxCNC does."),
     report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
     out: Optional[Path] = typer.Option(None, "-o", "--out", help="Write the prediction as a log (.mcap or .csv)."),
@@ -28,11 +30,14 @@ def predict(
     check_output(json_out, "--json", ".json")
     check_output(report, "--report", ".html")
     check_output(out, "--out", ".mcap", ".csv")
-    machines = load_machines(machine, set_)
+    machines = load_machines(machine, set_, ini)
     summaries, comparisons = predict_files(programs, machines, against=against, json_out=json_out,
                                            report=report, out=out)
     for s in summaries:
         typer.echo(f"machine {s.machine}")
+        typer.echo(f"  planner: {s.planner['words']}")
+        if s.cycle_time_s is not None:
+            typer.echo(f"  cycle time {s.cycle_time_s:.3f} s")
         for w in s.warnings:
             typer.echo(f"  warning: {w}")
         if s.contour_max_mm is not None:
@@ -49,7 +54,15 @@ def predict(
         d = c.to_dict()
         typer.echo(f"against {c.source}: contour error max measured {d['measured_max_abs_mm'] * 1e3:.2f} µm, "
                    f"predicted {d['predicted_max_abs_mm'] * 1e3:.2f} µm; rms of the difference "
-                   f"{d['rms_difference_ratio'] * 100:.1f} % of the measured rms")
+                   f"{d['rms_difference_ratio'] * 100:.1f} % of the measured rms (model driven by the recorded command)")
+        if c.standalone:
+            a = c.standalone
+            typer.echo(f"  stand-alone prediction (planned here): max {a['predicted_max_abs_mm'] * 1e3:.2f} µm "
+                       f"({(a['max_ratio'] - 1) * 100:+.1f} %), rms of the difference "
+                       f"{a['rms_difference_ratio'] * 100:.1f} % of the measured rms")
+        if c.measured_cycle_s and c.predicted_cycle_s:
+            typer.echo(f"  cycle time measured {c.measured_cycle_s:.3f} s, predicted {c.predicted_cycle_s:.3f} s "
+                       f"({(c.predicted_cycle_s / c.measured_cycle_s - 1) * 100:+.2f} %)")
     for path in (out, json_out, report):
         if path is not None:
             typer.echo(f"wrote {path}")

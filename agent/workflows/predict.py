@@ -26,12 +26,18 @@ def is_identified_machine(machine: str | None) -> bool:
     return machine is not None and machine.lower().endswith(".json")
 
 
-def load_machines(paths: Sequence[Path], overrides: Sequence[str] = ()) -> list[VirtualMachine]:
+def load_machines(paths: Sequence[Path], overrides: Sequence[str] = (), ini: Path | None = None) -> list[VirtualMachine]:
     """One virtual machine per result JSON; ``overrides`` (AXIS.PARAM=VALUE) make one more machine
-    from the first when a single JSON is given (the tuning comparison), else apply to each."""
+    from the first when a single JSON is given (the tuning comparison), else apply to each.
+    ``ini``: a LinuxCNC INI whose per-axis limits every machine plans with."""
     if not paths:
         raise InputError.about("machine", "no machine given (a result JSON written by agent identify --json)")
     machines = [load_virtual_machine(p) for p in paths]
+    if ini is not None:
+        from gcode_gen.planner_limits import read_linuxcnc_ini
+
+        limits = read_linuxcnc_ini(ini)
+        machines = [m.with_planner_limits(limits) for m in machines]
     if overrides:
         if len(machines) == 1:
             machines.append(machines[0].with_overrides(overrides))

@@ -1,0 +1,159 @@
+"""Planning like LinuxCNC (issue 41): per-axis velocity and acceleration limits, read from the
+controller's INI, and the prediction saying which planner it used."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import gcode_gen
+from agent import cli
+from core.errors import InputError
+from gcode_gen.interpolator import interpolate
+from gcode_gen.interpreter import parse_program
+from gcode_gen.planner_limits import read_linuxcnc_ini
+
+cli._register()
+ROOT = Path(__file__).resolve().parent.parent
+LIMITS = {"X": (200.0, 2000.0), "Y": (200.0, 2000.0)}
+
+
+def _program(text: str):
+    return parse_program("G21 G90 G17 G94\nG61.1\n" + text + "\nM2\n", name="t.ngc")
+
+
+def _path_acceleration(tr) -> np.ndarray:
+    P = np.column_stack([tr.axes["X"], tr.axes["Y"]])
+    return np.linalg.norm(np.diff(P, 2, axis=0), axis=1) / tr.Ts ** 2
+
+
+def test_a_45_degree_line_accelerates_at_each_axis_limit_not_the_path_limit():
+    """2000 mm/s² per axis is 2828 mm/s² along a 45° line (each axis at its limit)."""
+    prog = _program("G0 X0 Y0\nG1 X20 Y20 F6000")
+    per_axis = interpolate(prog, axis_limits=LIMITS, rapid_feed=200.0)
+    path = interpolate(prog, a_max=2000.0)
+    assert _path_acceleration(per_axis).max() == pytest.approx(2000 * math.sqrt(2), rel=0.02)
+    assert _path_acceleration(path).max() == pytest.approx(2000, rel=0.02)
+    for ax in "XY":
+        a = np.abs(np.diff(per_axis.axes[ax], 2)) / per_axis.Ts ** 2
+        assert a.max() <= 2000 * 1.001
+    assert per_axis.duration < path.duration
+
+
+def test_an_axis_limit_caps_the_speed_of_the_line_it_moves_along():
+    prog = _program("G0 X0 Y0\nG1 X100 Y10 F6000")  # X carries almost all the motion
+    tr = interpolate(prog, axis_limits={"X": (50.0, 2000.0), "Y": (200.0, 2000.0)}, rapid_feed=200.0)
+    vx = np.abs(np.diff(tr.axes["X"])) / tr.Ts
+    assert vx.max() == pytest.approx(50.0, rel=1e-3)
+
+
+def test_an_arc_has_half_the_acceleration_along_it_when_its_speed_limit_is_cut():
+    """LinuxCNC sets an arc's tangential acceleration for the arc's speed limit (here 200 mm/s,
+    whose v²/r exceeds 0.866·a on r = 10 mm), not for the feed: a/2 = 1000 mm/s²."""
+    prog = _program("G0 X10 Y0\nG3 X10 Y0 I-10 J0 F6000")
+    tr = interpolate(prog, axis_limits=LIMITS, rapid_feed=200.0)
+    arc = tr.block == max(tr.block)
+    P = np.column_stack([tr.axes["X"], tr.axes["Y"]])[arc]
+    v = np.linalg.norm(np.diff(P, axis=0), axis=1) / tr.Ts
+    ramp = v[:40]
+    assert np.diff(ramp).max() / tr.Ts == pytest.approx(1000.0, rel=0.05)
+    assert v.max() == pytest.approx(100.0, rel=1e-3)
+
+
+def test_the_test_machines_ini_gives_its_axis_limits():
+    lim = read_linuxcnc_ini(ROOT / "fixtures/linuxcnc/machine.ini")
+    assert lim.axes == {"X": (200.0, 2000.0)}  # the one-axis machine: [TRAJ] COORDINATES = X
+    assert lim.max_linear_velocity == 200.0
+    assert "machine.ini" in lim.describe() and "2000 mm/s²" in lim.describe()
+
+
+def test_an_ini_without_limits_is_one_line(tmp_path):
+    ini = tmp_path / "bad.ini"
+    ini.write_text("[TRAJ]\nCOORDINATES = X Y\n[AXIS_X]\nMAX_VELOCITY = 100\nMAX_ACCELERATION = 500\n")
+    with pytest.raises(InputError, match="axis Y has no MAX_VELOCITY/MAX_ACCELERATION"):
+        read_linuxcnc_ini(ini)
+    with pytest.raises(InputError, match="no such INI file"):
+        read_linuxcnc_ini(tmp_path / "missing.ini")
+
+
+
+
+@pytest.fixture(scope="module")
+def result_json(tmp_path_factory):
+    import ident
+    import virtual_cnc
+
+    rec = virtual_cnc.simulate(gcode_gen.generate(["X", "Y"], seed=3, n_low=60, n_high=20), "fadal-pid", seed=3)
+    path = tmp_path_factory.mktemp("m") / "result.json"
+    path.write_text(ident.identify(rec, diagnose=False).to_json())
+    return path
+
+
+def test_predict_says_which_planner_and_limits_it_used_and_the_cycle_time(result_json, tmp_path):
+    prog = tmp_path / "diamond.ngc"
+    prog.write_text(gcode_gen.write(gcode_gen.diamond(size=20, feed=100), "linuxcnc"))
+    out = tmp_path / "p.json"
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), "--ini",
+                                       str(ROOT / "fixtures/linuxcnc/machine.ini"), "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "planner: LinuxCNC planner, per-axis limits from machine.ini: X 200 mm/s 2000 mm/s²" in res.output
+    doc = json.loads(out.read_text())["machines"][0]
+    assert doc["planner"]["kind"] == "per-axis" and doc["planner"]["source"] == "machine.ini"
+    # the test machine's INI is the one-axis machine's: Y is unlimited, X at 2000 mm/s²
+    assert doc["cycle_time_s"] > 0.2
+    plain = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
+    assert "planner: path-limited planner (2000 mm/s² along the path" in plain.output
+
+
+def test_a_bad_ini_is_a_one_line_error_with_exit_2(result_json, tmp_path):
+    prog = tmp_path / "c.ngc"
+    prog.write_text(gcode_gen.write(gcode_gen.circle(size=20, feed=100), "linuxcnc"))
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), "--ini",
+                                       str(tmp_path / "nope.ini")])
+    assert res.exit_code == 2
+    assert "no such INI file" in res.output and "Traceback" not in res.output
+
+
+def test_blending_the_planner_does_not_model_is_predicted_as_exact_stop_with_a_warning(result_json, tmp_path):
+    prog = tmp_path / "blend.ngc"
+    ini = ["--ini", str(ROOT / "fixtures/linuxcnc/machine.ini")]
+    prog.write_text("G21 G90 G17 G94\nG64 P0.01 (blend)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
+    assert res.exit_code == 0, res.output
+    assert "warning: blend.ngc: G64 path blending (modelled with --ini's per-axis planner) is not modelled" in res.output
+    assert "G64" not in CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), *ini]).output
+    prog.write_text("G21 G90 G17 G94\nG64 (no tolerance)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), *ini])
+    assert "warning: blend.ngc: G64 without P is not modelled" in res.output
+    prog.write_text("G21 G90 G17 G94\nG64 P0.01\nG0 X0 Y0\nG1 X10 Y0 F3000\nG3 X10 Y10 I0 J5\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), *ini])
+    assert "warning: blend.ngc: blending into or out of an arc under G64 is not modelled" in res.output
+    prog.write_text("G21 G90 G17 G94\nG61.1 (not G64)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
+    assert "G64" not in res.output
+
+
+@pytest.mark.parametrize("P", [0.01, 0.1])
+def test_g64_p_blends_a_corner_with_an_arc_through_the_tolerance(P):
+    """LinuxCNC's tangent-arc blend at a 90° corner: the path passes P from the corner, on an
+    arc of R = P·sin45°/(1 − sin45°) run at sqrt(0.866·a·R), the lines at their per-axis limits."""
+    prog = parse_program(f"G21 G90 G17 G94\nG64 P{P}\nG0 X10 Y0\nG1 X0 Y10 F6000\nG1 X-10 Y0\nG1 X0 Y-10\nM2\n",
+                         name="d.ngc")
+    tr = interpolate(prog, axis_limits=LIMITS, rapid_feed=200.0, start={"X": 10.0, "Y": 0.0})
+    x, y = tr.axes["X"], tr.axes["Y"]
+    d = np.hypot(x - 0.0, y - 10.0)
+    k = int(np.argmin(d))
+    assert P - 1e-6 <= d[k] <= 1.1 * P  # the nearest sample, within half a period of the arc's middle
+    R = P * math.sin(math.pi / 4) / (1 - math.sin(math.pi / 4))
+    v = np.hypot(np.diff(x), np.diff(y)) / tr.Ts
+    assert v[k] == pytest.approx(math.sqrt(0.866 * 2000.0 * R), rel=0.03)
+    assert v.max() == pytest.approx(100.0, rel=5e-3)
+    assert (x[-1], y[-1]) == (0.0, -10.0)
+    # the last line ends without a blend: LinuxCNC runs it at half its acceleration (2828/2)
+    acc = np.diff(v[-60:]) / tr.Ts
+    assert acc.min() == pytest.approx(-1414.0, rel=0.03)
