@@ -260,7 +260,7 @@ def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, r
             if vmax is None:
                 segs.append(_arc_segment(b, p, q, index, feed, a_max))
             else:
-                plane = [index[a] for a in ("X", "Y") if a in index]
+                plane = [index[a] for a in _plane_axes(b) if a in index]
                 v_limit = min(float(np.min(vmax[plane])), rapid_feed)
                 segs.append(_arc_segment(b, p, q, index, min(feed, v_limit), float(np.min(amax[plane])),
                                          ARC_NORMAL_RATIO_LINUXCNC, v_limit))
@@ -414,28 +414,39 @@ def _chain_positions(sg: _Segment, n: int) -> tuple[np.ndarray, np.ndarray]:
     return pos, line
 
 
+def _plane_axes(b: Block) -> tuple[str, str]:
+    """The arc plane's (first, second) axes: G3 turns from the first towards the second
+    (G17 X→Y, G18 Z→X, G19 Y→Z, as RS274/NGC counts the sense seen from the third axis's +)."""
+    return {"XY": ("X", "Y"), "XZ": ("Z", "X"), "YZ": ("Y", "Z")}[b.plane]
+
+
 def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], feed: float, a_max: float,
                  normal_ratio: float = ARC_NORMAL_RATIO_PATH, v_limit: float | None = None) -> _Segment:
-    """An arc block; ``v_limit`` (LinuxCNC): the tangential acceleration is set for the arc's
+    """An arc block in its plane (``Block.plane``), ``Block.turns`` full turns counted;
+    ``v_limit`` (LinuxCNC): the tangential acceleration is set for the arc's
     speed limit, not its feed (tc's ``pmCircleActualMaxVel`` with the segment's maxvel),
     so a feed override could raise the speed without exceeding the limits."""
-    if b.center is None or "X" not in index or "Y" not in index:
-        raise InputError(f"line {b.line}: arc without an XY centre")
-    ix, iy = index["X"], index["Y"]
-    cx, cy = b.center["X"], b.center["Y"]
+    a1, a2 = _plane_axes(b)
+    if b.center is None or a1 not in index or a2 not in index or a1 not in b.center or a2 not in b.center:
+        raise InputError(f"line {b.line}: arc without a {a1}{a2} centre")
+    ix, iy = index[a1], index[a2]
+    cx, cy = b.center[a1], b.center[a2]
     x0, y0, x1, y1 = p[ix], p[iy], q[ix], q[iy]
     r0, r1 = math.hypot(x0 - cx, y0 - cy), math.hypot(x1 - cx, y1 - cy)
     if min(r0, r1) <= 1e-9:
         raise InputError(f"line {b.line}: arc radius is zero")
     th0, th1 = math.atan2(y0 - cy, x0 - cx), math.atan2(y1 - cy, x1 - cx)
+    extra = 2 * math.pi * max(int(b.turns) - 1, 0)  # P: full turns beyond the first sweep
     if b.motion == "G3":
         dth = (th1 - th0) % (2 * math.pi)
         if dth < 1e-9:
             dth = 2 * math.pi  # end = start: full circle
+        dth += extra
     else:
         dth = -((th0 - th1) % (2 * math.pi))
         if dth > -1e-9:
             dth = -2 * math.pi
+        dth -= extra
     other = q - p
     other[ix] = other[iy] = 0.0
     L = math.hypot(0.5 * (r0 + r1) * abs(dth), float(np.linalg.norm(other)))

@@ -214,3 +214,21 @@ def test_25_second_program_is_interpolated_quickly_enough_to_not_matter():
 def test_bad_parameters_are_input_errors(kwargs, message):
     with pytest.raises(InputError, match=message):
         interpolate(_prog("G0 X1\n"), **kwargs)
+
+
+def test_an_arc_in_the_xz_plane_turns_as_rs274_counts_it():
+    """G18 G2 from X0 to X10 about X5: clockwise in LinuxCNC's (Z, X) frame (rs274 prints
+    ARC_FEED(z, x, zc, xc, -1)), so the path dips to Z = -5 on a 5 mm radius."""
+    tr = interpolate(parse_program("G21 G0 X0 Y0 Z0\nG18 G2 X10 Z0 I5 K0 F600\nM2\n"))
+    x, z = tr.axes["X"], tr.axes["Z"]
+    assert z.min() == pytest.approx(-5.0, abs=1e-6) and z.max() <= 1e-9
+    assert np.max(np.abs(np.hypot(x - 5.0, z) - 5.0)) < 1e-6
+
+
+def test_an_arc_with_p_turns_runs_every_turn():
+    """G3 … P3 back to its start point runs three full circles (3 × 2π·5 mm at 10 mm/s)."""
+    tr = interpolate(parse_program("G21 G0 X0 Y0\nG3 X0 Y0 I5 J0 P3 F600\nM2\n"))
+    assert tr.t[-1] == pytest.approx(3 * 2 * np.pi * 5.0 / 10.0, rel=0.01)
+    y = tr.axes["Y"]
+    crossings = np.count_nonzero((y[:-1] < 0) & (y[1:] >= 0))  # once per turn, up through the start
+    assert crossings == 3
