@@ -91,8 +91,9 @@ class CommandedRun:
         return None if blk is None or blk.motion == "G0" else blk.feed
 
 
-def load_program(item: ProgramLike) -> tuple[str, str, Program]:
-    """(name, text, parsed program) of a program file, a parsed Program or a generated Toolpath."""
+def load_program(item: ProgramLike, tool_table: "str | Path | None" = None) -> tuple[str, str, Program]:
+    """(name, text, parsed program) of a program file, a parsed Program or a generated Toolpath;
+    ``tool_table``: a LinuxCNC tool table file for the tool offsets (G43 H, G41/G42 D) of a file."""
     if isinstance(item, Toolpath):
         text = write(item, "linuxcnc")
         return item.name, text, parse_program(text, name=item.name)
@@ -105,7 +106,17 @@ def load_program(item: ProgramLike) -> tuple[str, str, Program]:
         raise InputError(f"{path}: no such program file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(f"{path}: cannot read program ({exc})") from None
-    return path.name, text, parse_program(text, name=path.name)
+    return path.name, text, parse_program(text, name=path.name, tool_table=tool_table)
+
+
+def parse_program_files(paths: Sequence[ProgramLike], tool_table: "str | Path | None") -> list[ProgramLike]:
+    """Program files parsed with ``tool_table`` (as :class:`Program`, which every command runs
+    as it would the file); the items unchanged without a table."""
+    if tool_table is None:
+        return list(paths)
+    if not Path(tool_table).is_file():
+        raise InputError(f"--tool-table {tool_table}: no such file")
+    return [load_program(p, tool_table)[2] for p in paths]
 
 
 def command_programs(

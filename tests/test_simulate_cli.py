@@ -84,3 +84,20 @@ def test_simulate_missing_program_and_wrong_suffix(tmp_path, programs):
     assert res.exit_code == 2 and "no such program file" in res.stderr
     res = invoke("simulate", *programs, "-o", tmp_path / "x.txt")
     assert res.exit_code == 2 and ".mcap" in res.stderr
+
+
+def test_a_tool_length_offset_runs_with_the_tool_table_it_needs(tmp_path):
+    """G43 H1 needs tool 1's length: without --tool-table one line says so; with a LinuxCNC
+    tool table the program runs (a length offset moves only Z, which this program leaves)."""
+    prog = tmp_path / "tool.ngc"
+    prog.write_text("G21 G17 G90\nT1 M6\nG43 H1\nG0 X0 Y0\nG1 X10 Y0 F600\nG1 X10 Y10\nG49\nM2\n")
+    table = tmp_path / "tools.tbl"
+    table.write_text("T1 P1 Z25.0 D6.0 ;6 mm end mill\n")
+    runner = CliRunner()
+    res = runner.invoke(cli.app, ["simulate", str(prog), "-o", str(tmp_path / "a.mcap")])
+    assert res.exit_code == 2 and "--tool-table" in res.output and "tool.ngc:3" in res.output
+    assert not (tmp_path / "a.mcap").exists()
+    res = runner.invoke(cli.app, ["simulate", str(prog), "-o", str(tmp_path / "b.mcap"), "--tool-table", str(table)])
+    assert res.exit_code == 0, res.output
+    rec = load_recording(tmp_path / "b.mcap")
+    assert rec.axes["X"].commanded.max() == pytest.approx(10.0)

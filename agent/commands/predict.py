@@ -19,6 +19,8 @@ def predict(
     report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the figures as JSON here."),
     out: Optional[Path] = typer.Option(None, "-o", "--out", help="Write the prediction as a log (.mcap or .csv)."),
+    tool_table: Optional[Path] = typer.Option(None, "--tool-table", help="LinuxCNC tool table for the programs' tool "
+                                                                         "offsets (G43 H, G41/G42 D; docs/gcode-support.md)."),
 ) -> None:
     """Predict the tracking and contour errors of PROGRAMs on the identified machine(s).
 
@@ -30,6 +32,9 @@ def predict(
     check_output(json_out, "--json", ".json")
     check_output(report, "--report", ".html")
     check_output(out, "--out", ".mcap", ".csv")
+    from gcode_gen.commands import parse_program_files
+
+    programs = parse_program_files(programs, tool_table)
     machines = load_machines(machine, set_, ini)
     summaries, comparisons = predict_files(programs, machines, against=against, json_out=json_out,
                                            report=report, out=out)

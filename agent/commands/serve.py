@@ -27,6 +27,8 @@ def serve(
     linger: Optional[float] = typer.Option(None, "--linger",
                                            help="keep serving the end marker this long after the program, s"),
     opt: List[str] = typer.Option([], "--opt", help="transport option NAME=VALUE, e.g. format=ascii (repeatable)"),
+    tool_table: Optional[Path] = typer.Option(None, "--tool-table", help="LinuxCNC tool table for the programs' tool "
+                                                                         "offsets (G43 H, G41/G42 D; docs/gcode-support.md)."),
 ) -> None:
     """Serve commanded/actual positions of a virtual CNC run of PROGRAMS over serial, Modbus or CAN.
 
@@ -47,6 +49,8 @@ def serve(
     options = parse_endpoint_options(endpoint_class(transport), list(opt))
     if linger is not None:
         options["linger"] = linger
-    rec = build_recording(programs or [], machine, effect, seed, recording)
+    from gcode_gen.commands import parse_program_files
+
+    rec = build_recording(parse_program_files(programs or [], tool_table), machine, effect, seed, recording)
     faults = FaultPlan(drop_rate=drop_rate, corrupt_rate=corrupt_rate, disconnect_at_s=disconnect_at, seed=seed)
     run_serve(transport, rec, speed=speed, faults=faults, options=options, fault_log=fault_log)

@@ -19,6 +19,8 @@ def simulate(
     effect: List[str] = typer.Option(
         [], "--effect", help="Add physics: NAME=VALUE or NAME=key:value,key:value (docs/spec.md §7, docs/machine-file.md), repeatable."),
     seed: int = typer.Option(0, "--seed", help="Seed of the encoder noise."),
+    tool_table: Optional[Path] = typer.Option(None, "--tool-table", help="LinuxCNC tool table for the programs' tool "
+                                                                         "offsets (G43 H, G41/G42 D; docs/gcode-support.md)."),
     csv: Optional[Path] = typer.Option(None, "--csv", help="Also write the CSV of docs/recording-format.md to this file."),
 ) -> None:
     """Run PROGRAMs on the virtual CNC and write a recording in exactly the format a capture writes.
@@ -35,6 +37,9 @@ def simulate(
     check_seed(seed)
     check_output(out, "-o")
     check_output(csv, "--csv", ".csv")
+    from gcode_gen.commands import parse_program_files
+
+    programs = parse_program_files(programs, tool_table)
     if is_identified_machine(machine):
         from ident.virtual_machine import load_virtual_machine
 

@@ -382,7 +382,8 @@ class Machine:
 
     def _tool(self, number: int) -> Tool:
         if self.tools is None:
-            raise InterpError(f"tool {number} is used for an offset (G43, G41/G42) but no tool table was given")
+            raise InterpError(f"tool {number} is used for an offset (G43, G41/G42) but no tool table was given "
+                              "(--tool-table FILE, a LinuxCNC tool table)")
         if number not in self.tools:
             raise InterpError(f"tool {number} is not in the tool table")
         return self.tools[number]
