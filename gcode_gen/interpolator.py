@@ -236,7 +236,7 @@ def _line_limits(d: np.ndarray, vmax: np.ndarray | None, amax: np.ndarray | None
 def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, rapid_feed: float, blending: bool,
               axis_limits: AxisLimits | None = None) -> list[_Segment]:
     index = {ax: i for i, ax in enumerate(names)}
-    tolerances = path_tolerances(program.text or "") if axis_limits else {}
+    tolerances = path_tolerances(program.blocks) if axis_limits else {}
     vmax = amax = None
     if axis_limits:
         vmax = np.array([axis_limits[ax][0] if ax in axis_limits else math.inf for ax in names])

@@ -1,31 +1,26 @@
-"""The path control mode of each block of a program: exact stop (G61, G61.1) or blending
-with a tolerance (G64 P…), as the controller keeps it modal from line to line.
+"""The path control mode of each block of a program, in the planner's terms: exact stop
+(G61, G61.1, canned cycles) or blending with a tolerance (G64 P…).
 
-The interpreter (gcode_gen.interpreter) accepts these words without recording them; the
-planner needs them, so they are read here from the program's text.
+The interpreter keeps the mode modal from block to block and records it on each block
+(:attr:`gcode_gen.program.Block.blend_tolerance`: None for exact stop, ``inf`` for G64
+without P, else P in mm); this module states it by program line for the planner.
 """
 
 from __future__ import annotations
 
-import re
+import math
+from typing import Iterable
+
+from gcode_gen.program import Block
 
 __all__ = ["path_tolerances"]
 
-_COMMENT = re.compile(r"\([^)]*\)|;.*")
-_WORD = re.compile(r"G0*(64|61\.1|61)(?![.\d])(?:P([-+]?[\d.]+))?")
 
-
-def path_tolerances(text: str) -> dict[int, float | None]:
-    """Line number (1-based) -> the blending tolerance in force there, mm: 0.0 for exact stop
-    (the default), the P value of G64 P…, None for G64 without P (blend at any deviation)."""
+def path_tolerances(blocks: Iterable[Block]) -> dict[int, float | None]:
+    """Program line (1-based) -> the blending tolerance in force for its block, mm: 0.0 for
+    exact stop, the P value of G64 P…, None for G64 without P (blend at any deviation)."""
     out: dict[int, float | None] = {}
-    mode: float | None = 0.0
-    for number, raw in enumerate(text.splitlines(), start=1):
-        line = _COMMENT.sub("", raw).upper().replace(" ", "")
-        for m in _WORD.finditer(line):
-            if m.group(1) == "64":
-                mode = float(m.group(2)) if m.group(2) else None
-            else:
-                mode = 0.0
-        out[number] = mode
+    for b in blocks:
+        tol = b.blend_tolerance
+        out[b.line] = 0.0 if tol is None else (None if math.isinf(tol) else float(tol))
     return out

@@ -202,7 +202,7 @@ def block_of_samples(run: CommandedRun, commanded: dict[str, np.ndarray],
     ends, lines, moves, tols = [], [], [], []
     pos = np.array([run.commanded[a][0] if a in run.commanded else 0.0 for a in axes])
     for p, blocks in enumerate(run.blocks):
-        blend = path_tolerances(run.texts[p]) if p < len(run.texts) else {}
+        blend = path_tolerances(blocks.values())
         for line, b in sorted(blocks.items()):
             tols.append(tol + float(blend.get(line) or 0.0))  # a blended corner is passed within G64 P
             q = pos.copy()
@@ -306,8 +306,8 @@ def analyse(pred: Prediction) -> PredictionSummary:
 def _path_mode_warnings(run: CommandedRun, per_axis: bool) -> list[str]:
     """Blending (G64) the planner does not model: say so."""
     out = []
-    for info, text, blocks in zip(run.programs, run.texts, run.blocks):
-        tol = path_tolerances(text)
+    for info, blocks in zip(run.programs, run.blocks):
+        tol = path_tolerances(blocks.values())
         modes = set(tol.values())
         arcs = any(b.motion in ("G2", "G3") and tol.get(line) != 0.0 for line, b in blocks.items())
         if None in modes or (not per_axis and any(m for m in modes)) or (per_axis and arcs):
