@@ -267,7 +267,7 @@ def test_a_ballbar_circle_too_long_to_hold_is_refused(tmp_path, work):
     rec, res = tmp_path / "xy.mcap", tmp_path / "xy.json"
     assert agent("simulate", tmp_path / "p/ident_low.nc", tmp_path / "p/ident_high.nc", "-o", rec).returncode == 0
     assert agent("identify", rec, "--no-diagnose", "--no-refine", "--json", res).returncode == 0
-    refused(agent("ballbar", "--machine", res, "--radius", "1e6"), "ballbar_ccw runs 106 h of machine time")
+    refused(agent("ballbar", "--machine", res, "--radius", "1e6"), "ballbar runs 419 h of machine time")
 
 
 def test_a_machine_file_with_an_impossible_servo_loop_is_refused(tmp_path, work):
