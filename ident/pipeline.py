@@ -24,7 +24,7 @@ from ident.axis_model import AxisModel
 from ident.contour import contour_error
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel
-from ident.preprocessing import prepare_recording
+from ident.preprocessing import prepare_recording, remove_reference
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
 from ident.results import AxisResult, AxisTraces, ContourResult, IdentifyResult
@@ -132,6 +132,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
           against: Recording | None, prior: DriveModel | None) -> AxisResult:
     Ts = rec.sample_period
     tr = rec.axes[axis]
+    ref = rec.metadata.get("reference_mm", {}).get(axis, 0.0)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     reg = build_regression(tr.commanded, tr.actual, Ts, rec.segment, axis=axis)
@@ -170,7 +171,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         vt = val.axes[axis]
         xv_hat = _free_run(model, val, axis, reg.shift)
         fit_val = fit_result(vt.commanded - vt.actual, vt.commanded - xv_hat)
-        val_traces = AxisTraces(val.t, vt.commanded, vt.actual, xv_hat, val.segment)
+        val_traces = AxisTraces(val.t, vt.commanded + ref, vt.actual + ref, xv_hat + ref, val.segment)
     timings["fits"] = time.perf_counter() - t0
 
     diagnosis = None
@@ -187,7 +188,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         fit_identification=fit_id, fit_validation=fit_val, fit_constrained=fit_eq, fit_unconstrained=fit_ls,
         unconstrained_note=_ls_note(ls.model, opts.bounds, Ts, fit_ls, fit_id, rec.duration),
         diagnosis=diagnosis, timings=timings,
-        traces=AxisTraces(rec.t, tr.commanded, tr.actual, x_hat, rec.segment),
+        traces=AxisTraces(rec.t, tr.commanded + ref, tr.actual + ref, x_hat + ref, rec.segment),
         validation_traces=val_traces,
     )
 
@@ -203,6 +204,7 @@ def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | Non
     from ident.diagnosis import diagnose  # imported when used: it is most of ident's import time
 
     tr = rec.axes[axis]
+    ref = rec.metadata.get("reference_mm", {}).get(axis, 0.0)
     validation = None
     if val is not None:
         vt = val.axes[axis]
@@ -212,9 +214,9 @@ def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | Non
         if axis not in against.axes or against.n_samples != rec.n_samples:
             raise InputError.about("against", f"the simulated recording must hold axis {axis} with the same "
                                    f"{rec.n_samples} samples as the recording (it has {against.n_samples})")
-        sim_actual = against.axes[axis].actual
+        sim_actual = against.axes[axis].actual - ref
     return diagnose(tr.commanded, tr.actual, rec.sample_period, model, progress=progress,
-                    segment=rec.segment, validation=validation, against=sim_actual, config=config)
+                    segment=rec.segment, validation=validation, against=sim_actual, config=config, reference=ref)
 
 
 def _contour(results: dict[str, AxisResult], rec: Recording, val: Recording | None) -> ContourResult | None:
@@ -297,9 +299,13 @@ def identify(
     # The fits solve thousands of 3x3..9x9 systems: a multi-threaded BLAS would spend
     # more on hand-offs between threads than on the arithmetic.
     with threadpool_limits(limits=1, user_api="blas"):
-        rec = prepare_recording(_as_recording(recording, "recording"))
+        # positions relative to the recording's first actual position (bit for bit the same
+        # arrays wherever the axis's origin lies); the traces and a cyclic error's phase are
+        # told back in absolute position
+        rec = remove_reference(prepare_recording(_as_recording(recording, "recording")))
         names = _pick_axes(rec, axes)
-        val = prepare_recording(_as_recording(validate, "validate")) if validate is not None else None
+        val = (remove_reference(prepare_recording(_as_recording(validate, "validate")), rec.metadata["reference_mm"])
+               if validate is not None else None)
         if val is not None:
             missing = [a for a in names if a not in val.axes]
             if missing:

@@ -42,6 +42,7 @@ from typing import Any, Callable
 
 import numpy as np
 from scipy.signal import lfilter
+from threadpoolctl import threadpool_limits
 
 from core.errors import InputError
 from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, segment_starts
@@ -596,6 +597,7 @@ def diagnose(
     effects: tuple[str, ...] = EFFECTS,
     progress: Callable[[str], None] | None = None,
     config: DiagnosisConfig | None = None,
+    reference: float = 0.0,
 ) -> Diagnosis:
     """Diagnose the mismatch between a recording of one axis and its drive model.
 
@@ -618,6 +620,9 @@ def diagnose(
     progress : called with a short description of each stage as it starts (for a
         progress line; the diagnosis takes seconds).
     config : the tunables (:class:`ident.diagnosis.config.DiagnosisConfig`); default ``DEFAULT``.
+    reference : the position (mm) that was removed from every position given
+        (:func:`ident.preprocessing.remove_reference`): a cyclic error's phase is told in
+        absolute position, ``x + reference``.  Nothing else depends on it.
 
     Raises
     ------
@@ -640,9 +645,13 @@ def diagnose(
     # the fits of the search are independent of each other: two worker threads (the
     # simulation kernel releases the GIL) run them side by side
     pool = ThreadPoolExecutor(max_workers=2)
+    # one BLAS thread: the few BLAS/LAPACK calls left (least-squares starts) then do their
+    # sums in the same order whatever the machine's thread count (the search's own linear
+    # algebra is in ident.fixed_order)
     try:
-        return _diagnose(x_r, x, Ts, theta, segment, starts, full, validation, against, effects, cfg, say,
-                         pool, t0)
+        with threadpool_limits(limits=1, user_api="blas"):
+            return _absolute_phase(_diagnose(x_r, x, Ts, theta, segment, starts, full, validation, against,
+                                             effects, cfg, say, pool, t0), reference)
     finally:
         pool.shutdown()
 
@@ -913,6 +922,26 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         mismatch_validation=loc_val,
         disturbance=disturbance,
     )
+
+
+def _absolute_phase(d: Diagnosis, reference: float) -> Diagnosis:
+    """``d`` with a cyclic error's phase moved from positions relative to ``reference`` to absolute ones.
+
+    ``A·sin(2π(x − x₀)/P + φ) = A·sin(2πx/P + φ − 2πx₀/P)``: the phase in absolute position
+    is φ − 2πx₀/P, wrapped to (−π, π].
+    """
+    def moved(p: dict) -> dict:
+        if not reference or "phase_rad" not in p:
+            return p
+        phi = p["phase_rad"] - 2.0 * math.pi * reference / p["period_mm"]
+        return {**p, "phase_rad": float(math.atan2(math.sin(phi), math.cos(phi)))}
+
+    if not reference:
+        return d
+    aug = dict(d.augmented_model)
+    aug["effects"] = {e: moved(p) if e == "cyclic_error" else p for e, p in aug.get("effects", {}).items()}
+    return replace(d, candidates=[replace(c, parameters=moved(c.parameters)) if c.effect == "cyclic_error" else c
+                                  for c in d.candidates], augmented_model=aug)
 
 
 def _disturbance(spec: ModelSpec, chunk: Chunk) -> dict:
