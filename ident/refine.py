@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.errors import InputError
+from ident.fixed_order import sum_squares
 from ident.least_squares import bounded_lm
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel, alphas_from_search
@@ -240,7 +241,7 @@ def refine(
         r = (free_run(m) - x)[::stride]
         if not np.all(np.isfinite(r)):
             return np.full(x[::stride].size, 1e3)
-        c = float(r @ r)
+        c = sum_squares(r)
         if c < best["cost"]:
             best["cost"], best["q"] = c, q.copy()
         return r
