@@ -47,6 +47,8 @@ def identified(emps, model):
                     ("train", em.pulses(emps.t, PULSE_N, TRAIN_WIDTH_S, TRAIN_PERIOD_S))):
         qm, _ = em.simulate(model, emps.qg, emps.Ts, f, q0=emps.qm[0])
         out[name] = ident.identify(real, validate=em.recording(emps.t, emps.qg, qm)).axes["X"]
+        if name == "train":  # the same pulses in the recording identified from, no validation
+            out["train_identified"] = ident.identify(em.recording(emps.t, emps.qg, qm)).axes["X"]
     return out
 
 
@@ -106,12 +108,12 @@ def test_the_validation_residual_is_localised_in_the_pulse_windows(emps, identif
     assert d["mismatch"]["time_blocks"]["count"] < len(windows)
 
 
-def _named_external_force(dg, model: em.EmpsModel):
-    """The accepted external_force candidate of the validation recording, and the pulses' size, mm/s²."""
+def _named_external_force(dg, model: em.EmpsModel, recording: str = "validation"):
+    """The accepted external_force candidate of ``recording``, and the pulses' size, mm/s²."""
     verdict = dg.verdict if isinstance(dg.verdict, list) else [dg.verdict]
     assert "external_force" in verdict
     ext = next(c for c in dg.candidates if c.effect == "external_force")
-    assert ext.accepted and ext.parameters["recording"] == "validation"
+    assert ext.accepted and ext.parameters["recording"] == recording
     assert ext.fit_after_pct > ext.fit_before_pct + 3.0
     # size: the equivalent acceleration is force / moving mass (mm/s²), within a factor 1.5
     expected = PULSE_N / model.M * 1e3
@@ -153,10 +155,13 @@ def test_pulses_on_half_of_the_time_all_through_the_run_are_an_external_force_wi
                                                                                                  identified):
     # no quiet majority for the pulses to stand out of: the windows are those of a level
     # that comes and goes (a piecewise-constant disturbance), the load independent of the motion
-    dg = identified["train"].diagnosis
-    ext, _ = _named_external_force(dg, model)
-    windows = em.pulse_windows(emps.t, TRAIN_WIDTH_S, TRAIN_PERIOD_S)
-    times = ext.parameters["times"]
-    assert len(windows) - 2 <= len(times) <= len(windows)  # a pulse at a segment's edge may be left out
-    assert all(any(abs(t0 - a) < 0.1 and abs(t1 - b) < 0.1 for a, b in windows) for t0, t1 in times)
-    assert "external" in dg.summary
+    # — on the validation recording and, with no validation recording, on the one identified
+    # from, whose base model has taken up part of the load
+    for which, recording in (("train", "validation"), ("train_identified", "identification")):
+        dg = identified[which].diagnosis
+        ext, _ = _named_external_force(dg, model, recording)
+        windows = em.pulse_windows(emps.t, TRAIN_WIDTH_S, TRAIN_PERIOD_S)
+        times = ext.parameters["times"]
+        assert len(windows) - 2 <= len(times) <= len(windows)  # a pulse at a segment's edge may be left out
+        assert all(any(abs(t0 - a) < 0.1 and abs(t1 - b) < 0.1 for a, b in windows) for t0, t1 in times)
+        assert "external" in dg.summary
