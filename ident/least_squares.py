@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ident.fixed_order import normal_products, solve, sum_squares
+
 __all__ = ["LMResult", "bounded_lm", "secant_lm"]
 
 #: Damping schedule: starting λ, its floor, the factor it grows by after a rejected trial
@@ -104,14 +106,15 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
     more so as multi-threaded BLAS is slow on a loaded machine.  Squaring J's condition
     number is tolerable here: the Marquardt damping keeps the system positive definite, and
     J itself is a finite difference, accurate to a few digits at best.  J is stored by
-    columns (each difference is one column) and its products are BLAS calls: ``ident.identify``
-    holds BLAS to one thread, which is 4-7x faster than ``einsum`` on a 22 000 x 11 J.
+    columns (each difference is one column); its products and the damped solve are
+    compiled loops in a fixed order (:mod:`ident.fixed_order`), not BLAS/LAPACK, whose
+    order of operations — and so the search's path — depends on the machine.
     """
     z, lb, ub, step = _box(z0, lb, ub, step)
     n = z.size
     nfev = 1
     r = resid(z)
-    cost = 0.5 * float(r @ r)
+    cost = 0.5 * sum_squares(r)
     lam = _LAM0
     h0 = step
     small = 0  # consecutive accepted steps with a relative decrease below ftol
@@ -132,7 +135,7 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
                 continue
             nfev += 1
             r_new = resid(z_new)
-            cost_new = 0.5 * float(r_new @ r_new)
+            cost_new = 0.5 * sum_squares(r_new)
             if np.isfinite(cost_new) and cost_new < cost:
                 break
             lam *= _LAM_UP
@@ -184,7 +187,7 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
     n = z.size
     r = resid(z)
     nfev = 1
-    cost = 0.5 * float(r @ r)
+    cost = 0.5 * sum_squares(r)
 
     def jacobian() -> np.ndarray:
         nonlocal nfev
@@ -212,7 +215,7 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
             continue
         r_new = resid(z_new)
         nfev += 1
-        cost_new = 0.5 * float(r_new @ r_new)
+        cost_new = 0.5 * sum_squares(r_new)
         delta = z_new - z
         dd = float(delta @ delta)
         if np.all(np.isfinite(r_new)) and dd > 0.0:
@@ -252,8 +255,8 @@ def _box(z0, lb, ub, step):
 
 
 def _normal(J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``JᵀJ`` and ``Jᵀr`` of the Gauss–Newton normal equations."""
-    return J.T @ J, J.T @ r
+    """``JᵀJ`` and ``Jᵀr`` of the Gauss–Newton normal equations (fixed order: :mod:`ident.fixed_order`)."""
+    return normal_products(J, r)
 
 
 def _fd_column(resid, z, r, j, h0, ub, relative_step) -> np.ndarray:
@@ -277,7 +280,7 @@ def _trial(z, A, g, free, lam, lb, ub):
     Af, gf = A[np.ix_(free, free)], g[free]
     d = np.maximum(np.diag(Af), 1e-12 * max(1.0, float(np.max(np.diag(Af)))))
     try:
-        delta = np.linalg.solve(Af + lam * np.diag(d), -gf)
+        delta = solve(Af + lam * np.diag(d), -gf)
     except np.linalg.LinAlgError:
         return None
     if not np.all(np.isfinite(delta)):

@@ -25,7 +25,7 @@ from ident.contour import contour_error
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel
 from ident.plausibility import check_identifiable
-from ident.preprocessing import prepare_recording
+from ident.preprocessing import prepare_recording, remove_reference
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
 from ident.results import AxisResult, AxisTraces, ContourResult, IdentifyResult
@@ -158,6 +158,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
           prior_source: str | None = None) -> AxisResult:
     Ts = rec.sample_period
     tr = rec.axes[axis]
+    ref = rec.metadata.get("reference_mm", {}).get(axis, 0.0)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     reg = build_regression(tr.commanded, tr.actual, Ts, rec.segment, axis=axis)
@@ -208,7 +209,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         vt = val.axes[axis]
         xv_hat = _free_run(model, val, axis, shift)
         fit_val = fit_result(vt.commanded - vt.actual, vt.commanded - xv_hat)
-        val_traces = AxisTraces(val.t, vt.commanded, vt.actual, xv_hat, val.segment)
+        val_traces = AxisTraces(val.t, vt.commanded + ref, vt.actual + ref, xv_hat + ref, val.segment)
     timings["fits"] = time.perf_counter() - t0
 
     diagnosis = None
@@ -225,7 +226,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         fit_identification=fit_id, fit_validation=fit_val, fit_constrained=fit_eq, fit_unconstrained=fit_ls,
         unconstrained_note=_ls_note(ls.model, opts.bounds, Ts, fit_ls, fit_id, rec.duration, opts.solver),
         diagnosis=diagnosis, timings=timings, uncertainty=uncertainty,
-        traces=AxisTraces(rec.t, tr.commanded, tr.actual, x_hat, rec.segment),
+        traces=AxisTraces(rec.t, tr.commanded + ref, tr.actual + ref, x_hat + ref, rec.segment),
         validation_traces=val_traces, prior_source=prior_source if prior is not None else None,
     )
 
@@ -279,6 +280,7 @@ def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | Non
     from ident.diagnosis import diagnose  # imported when used: it is most of ident's import time
 
     tr = rec.axes[axis]
+    ref = rec.metadata.get("reference_mm", {}).get(axis, 0.0)
     validation = None
     if val is not None:
         vt = val.axes[axis]
@@ -288,9 +290,9 @@ def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | Non
         if axis not in against.axes or against.n_samples != rec.n_samples:
             raise InputError.about("against", f"the simulated recording must hold axis {axis} with the same "
                                    f"{rec.n_samples} samples as the recording (it has {against.n_samples})")
-        sim_actual = against.axes[axis].actual
+        sim_actual = against.axes[axis].actual - ref
     return diagnose(tr.commanded, tr.actual, rec.sample_period, model, progress=progress,
-                    segment=rec.segment, validation=validation, against=sim_actual, config=config)
+                    segment=rec.segment, validation=validation, against=sim_actual, config=config, reference=ref)
 
 
 def _contour(results: dict[str, AxisResult], rec: Recording, val: Recording | None) -> ContourResult | None:
@@ -382,7 +384,10 @@ def identify(
     with threadpool_limits(limits=1, user_api="blas"):
         rec = prepare_recording(_as_recording(recording, "recording"), check_units=False)
         names = _pick_axes(rec, axes)
-        rec = check_identifiable(rec, names, units=units)
+        # positions relative to the recording's first actual position (bit for bit the same
+        # arrays wherever the axis's origin lies), after the checks that read absolute positions
+        # (units); the traces and a cyclic error's phase are told back in absolute position
+        rec = remove_reference(check_identifiable(rec, names, units=units))
         val = prepare_recording(_as_recording(validate, "validate"), check_units=False) if validate is not None else None
         if val is not None:
             missing = [a for a in names if a not in val.axes]
@@ -393,7 +398,7 @@ def identify(
                 raise RecordingError.about(
                     "validate", f"validation recording {_name(val, '')}: sample period {val.sample_period * 1e3:.4g} "
                     f"ms differs from the recording's {rec.sample_period * 1e3:.4g} ms")
-            val = check_identifiable(val, names, units=units)
+            val = remove_reference(check_identifiable(val, names, units=units), rec.metadata["reference_mm"])
         sim = _as_recording(against, "against") if against is not None else None
         priors = dict(prior or {})
         for a in names:

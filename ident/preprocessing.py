@@ -77,6 +77,8 @@ __all__ = [
     "direction",
     "interior_mask",
     "prepare_recording",
+    "remove_reference",
+    "POSITION_GRID_MM",
 ]
 
 #: Samples dropped at each segment end: ẍ_k = (ẋ_{k+1} − ẋ_{k−1})/(2Ts) needs x_{k±2} (eq. 3.9).
@@ -676,3 +678,44 @@ def prepare_recording(rec: "Recording", *, jitter_tol: float = 0.01, gap_factor:
             pass
     return Recording(t=t, axes=axes, sample_period=rec.sample_period, segment=seg,
                      metadata=dict(rec.metadata))
+
+
+#: The grid (mm) positions are kept on once a reference is removed: 1 nm, below any
+#: drive's encoder and above the floating-point rounding of positions up to metres.
+POSITION_GRID_MM = 1e-9
+
+
+def remove_reference(rec: "Recording", reference: dict[str, float] | None = None) -> "Recording":
+    """Positions relative to a reference position per axis, on the 1 nm grid.
+
+    The identification and the diagnosis are the same whatever the origin of the
+    positions: only differences of positions are physics (a cyclic error's phase, the one
+    exception, is told back in absolute position).  Left in, a large absolute position
+    rounds every sum differently from the same motion elsewhere, and the searches of the
+    diagnosis read rounding (docs/diagnosis.md, "Determinism").  The reference is the
+    first actual position of the identification recording — a point of the encoder grid,
+    so the grid is kept — and the difference is rounded to ``POSITION_GRID_MM``: moving
+    every position of a recording by a constant then gives the same arrays bit for bit
+    (recordings written to 1 nm or coarser; finer ones to within a last-digit tie).
+
+    Parameters
+    ----------
+    rec : Recording
+        On the regular grid (:func:`prepare_recording`).
+    reference : dict axis -> mm, optional
+        The references to remove (the identification recording's, for its validation
+        recording: both in one frame); default the first actual position of each axis.
+
+    Returns a new Recording with ``metadata["reference_mm"]`` the reference of each axis.
+    """
+    from core.recording import AxisTrace, Recording
+
+    ref = {name: float(tr.actual[0]) for name, tr in rec.axes.items()}
+    ref.update({k: float(v) for k, v in (reference or {}).items() if k in rec.axes})
+
+    def rel(v: np.ndarray, r: float) -> np.ndarray:
+        return np.round((np.asarray(v, dtype=float) - r) / POSITION_GRID_MM) * POSITION_GRID_MM
+
+    axes = {name: AxisTrace(rel(tr.commanded, ref[name]), rel(tr.actual, ref[name])) for name, tr in rec.axes.items()}
+    return Recording(t=rec.t, axes=axes, sample_period=rec.sample_period, segment=rec.segment,
+                     metadata={**rec.metadata, "reference_mm": ref})

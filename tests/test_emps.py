@@ -83,7 +83,7 @@ def test_constrained_pipeline_reaches_98_percent_with_poles_inside_the_bounds(em
     exact = solve("exact", regression.Phi, regression.Y, bounds, sample_period=TS)
     assert inside(exact.model, bounds)
     res = refine(exact.model, qg * 1e3, qm * 1e3, TS, shift=regression.shift, bounds=bounds,
-                 regression=regression, time_budget_s=5.0)
+                 regression=regression, max_evals=None)
     assert res.fit_before.tracking_error_fit_pct >= 98.0  # equation-error solution alone
     assert res.fit_after.tracking_error_fit_pct >= res.fit_before.tracking_error_fit_pct
     assert inside(res.model, bounds)
@@ -93,7 +93,7 @@ def test_refinement_from_the_unconstrained_ls_also_lands_inside_the_bounds(emps,
     _, qg, qm = emps
     theta, _ = lstsq_scaled(regression.Phi, regression.Y)
     res = refine(DriveModel.from_theta(theta), qg * 1e3, qm * 1e3, TS, shift=regression.shift,
-                 regression=regression, time_budget_s=5.0)
+                 regression=regression, max_evals=None)
     assert inside(res.model, Bounds())
     assert res.active_constraints == ("p_min",)
     assert res.fit_after.tracking_error_fit_pct >= 98.0

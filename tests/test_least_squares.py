@@ -209,11 +209,14 @@ def test_secant_lm_stops_when_no_step_can_be_computed():
 
 
 def test_the_module_imports_numpy_only():
-    path = Path(__file__).resolve().parents[1] / "ident" / "least_squares.py"
-    names = set()
-    for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            names |= {a.name.split(".")[0] for a in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            names.add(node.module.split(".")[0])
-    assert names <= {"numpy", "__future__", "dataclasses"}
+    # and its fixed-order linear algebra (ident.fixed_order) numpy and numba: no scipy
+    for module, allowed in (("least_squares", {"numpy", "__future__", "dataclasses", "ident"}),
+                            ("fixed_order", {"numpy", "__future__", "numba"})):
+        path = Path(__file__).resolve().parents[1] / "ident" / f"{module}.py"
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names.add(node.module.split(".")[0])
+        assert names <= allowed, module

@@ -42,6 +42,7 @@ from typing import Any, Callable
 
 import numpy as np
 from scipy.signal import lfilter
+from threadpoolctl import threadpool_limits
 
 from core.errors import InputError
 from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, segment_starts
@@ -596,6 +597,7 @@ def diagnose(
     effects: tuple[str, ...] = EFFECTS,
     progress: Callable[[str], None] | None = None,
     config: DiagnosisConfig | None = None,
+    reference: float = 0.0,
 ) -> Diagnosis:
     """Diagnose the mismatch between a recording of one axis and its drive model.
 
@@ -618,6 +620,9 @@ def diagnose(
     progress : called with a short description of each stage as it starts (for a
         progress line; the diagnosis takes seconds).
     config : the tunables (:class:`ident.diagnosis.config.DiagnosisConfig`); default ``DEFAULT``.
+    reference : the position (mm) that was removed from every position given
+        (:func:`ident.preprocessing.remove_reference`): a cyclic error's phase is told in
+        absolute position, ``x + reference``.  Nothing else depends on it.
 
     Raises
     ------
@@ -640,9 +645,13 @@ def diagnose(
     # the fits of the search are independent of each other: two worker threads (the
     # simulation kernel releases the GIL) run them side by side
     pool = ThreadPoolExecutor(max_workers=2)
+    # one BLAS thread: the few BLAS/LAPACK calls left (least-squares starts) then do their
+    # sums in the same order whatever the machine's thread count (the search's own linear
+    # algebra is in ident.fixed_order)
     try:
-        return _diagnose(x_r, x, Ts, theta, segment, starts, full, validation, against, effects, cfg, say,
-                         pool, t0)
+        with threadpool_limits(limits=1, user_api="blas"):
+            return _absolute_phase(_diagnose(x_r, x, Ts, theta, segment, starts, full, validation, against,
+                                             effects, cfg, say, pool, t0), reference)
     finally:
         pool.shutdown()
 
@@ -914,6 +923,26 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     )
 
 
+def _absolute_phase(d: Diagnosis, reference: float) -> Diagnosis:
+    """``d`` with a cyclic error's phase moved from positions relative to ``reference`` to absolute ones.
+
+    ``A·sin(2π(x − x₀)/P + φ) = A·sin(2πx/P + φ − 2πx₀/P)``: the phase in absolute position
+    is φ − 2πx₀/P, wrapped to (−π, π].
+    """
+    def moved(p: dict) -> dict:
+        if not reference or "phase_rad" not in p:
+            return p
+        phi = p["phase_rad"] - 2.0 * math.pi * reference / p["period_mm"]
+        return {**p, "phase_rad": float(math.atan2(math.sin(phi), math.cos(phi)))}
+
+    if not reference:
+        return d
+    aug = dict(d.augmented_model)
+    aug["effects"] = {e: moved(p) if e == "cyclic_error" else p for e, p in aug.get("effects", {}).items()}
+    return replace(d, candidates=[replace(c, parameters=moved(c.parameters)) if c.effect == "cyclic_error" else c
+                                  for c in d.candidates], augmented_model=aug)
+
+
 def _disturbance(spec: ModelSpec, chunk: Chunk) -> dict:
     """The equivalent input disturbance of ``spec`` along ``chunk``'s recording, analysed."""
     w = equivalent_disturbance(chunk.x_r, chunk.x, chunk.Ts, spec.theta, chunk.starts)
@@ -927,8 +956,11 @@ def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance
     Looked for on the recording where the model fails on held-out data (the validation
     recording when given).  A time-localised load cannot be predicted on another
     recording; it is *described*, and added as a known input to that recording's
-    simulation to show how much of the mismatch it explains.  Accepted when it removes at
-    least ``cfg.min_gain + cfg.per_param·k`` of the residual norm, k = 2 parameters per block.
+    simulation to show how much of the mismatch it explains: the load's scale and a
+    constant input beside it by least squares (a base fitted on the same recording has
+    taken up the load's mean).  Accepted when it removes at least
+    ``cfg.min_gain + cfg.per_param·k`` of the residual norm, k = 2 parameters per block and
+    the two of the scale and the constant.
 
     The load's effect is the difference of two free runs of eq. 3.3 (``ident.simulation``)
     that differ only by the input; it is added to the diagnosis's own free-run residual of
@@ -952,17 +984,26 @@ def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance
     e = chunk.x_r - chunk.x
     with np.errstate(all="ignore"):
         r0 = simulate_spec(base, chunk) - chunk.x
-        effect = (simulate(dm, chunk.x_r, chunk.Ts, segment=seg, x0=chunk.x, disturbance=w)
-                  - simulate(dm, chunk.x_r, chunk.Ts, segment=seg, x0=chunk.x))
-        r1 = r0 + effect
+        free = simulate(dm, chunk.x_r, chunk.Ts, segment=seg, x0=chunk.x)
+        effect = simulate(dm, chunk.x_r, chunk.Ts, segment=seg, x0=chunk.x, disturbance=w) - free
+        steady = simulate(dm, chunk.x_r, chunk.Ts, segment=seg, x0=chunk.x, disturbance=np.ones(chunk.n)) - free
+    # the load's scale and a constant beside it by least squares: a base fitted on the same
+    # recording has taken up the load's mean (as a friction offset, a gain), which the
+    # constant gives back; with a base fitted elsewhere the scale is ~1 and the constant ~0
+    E = np.column_stack([effect, steady])
+    coef = (np.linalg.lstsq(E, -r0, rcond=None)[0] if np.all(np.isfinite(E)) and np.all(np.isfinite(r0))
+            else np.zeros(2))
+    r1 = r0 + E @ coef
     n0, n1 = float(np.linalg.norm(r0)), float(np.linalg.norm(r1))
     gain = 1.0 - n1 / n0 if n0 > 0 and np.isfinite(n1) else -math.inf
-    need = cfg.min_gain + cfg.per_param * 2 * len(analysis["blocks"])
     blocks = analysis["blocks"]
-    params = {"force": float(np.median([abs(b["mean_mm_s2"]) for b in blocks])), "force_unit": "mm/s^2",
-              "times": [[b["t_start_s"], b["t_end_s"]] for b in blocks], "recording": name}
+    added = 2 * len(blocks) + 2
+    need = cfg.min_gain + cfg.per_param * added
+    params = {"force": float(abs(coef[0]) * np.median([abs(b["mean_mm_s2"]) for b in blocks])),
+              "force_unit": "mm/s^2", "times": [[b["t_start_s"], b["t_end_s"]] for b in blocks], "recording": name}
     score = {"held_out_residual_reduction": float(gain), "required_reduction": float(need),
-             "parameters_added": 2 * len(blocks), "words": analysis["words"], "recording": name,
+             "parameters_added": added, "words": analysis["words"], "recording": name,
+             "load_scale": float(coef[0]), "constant_beside_mm_s2": float(coef[1]),
              "rms_before_mm": n0 / math.sqrt(chunk.n), "rms_after_mm": n1 / math.sqrt(chunk.n),
              "held_out_rms_before_mm": n0 / math.sqrt(chunk.n), "held_out_rms_after_mm": n1 / math.sqrt(chunk.n)}
     return Candidate("external_force", params, _fit_pct(e, r0), _fit_pct(e, r1), bool(gain >= need), score)

@@ -30,7 +30,8 @@ import math
 
 import numpy as np
 
-from ident.diagnosis.residuals import excursion_blocks, position_periodogram, reversal_times, time_since
+from ident.diagnosis.residuals import (BLOCK_MIN_S, SEGMENT_EDGE_S, excursion_blocks, position_periodogram,
+                                       reversal_times, time_since)
 
 __all__ = ["equivalent_disturbance", "analyse_disturbance", "block_input", "DISTURBANCE_BAND_HZ"]
 
@@ -129,6 +130,98 @@ def _blocks(y: np.ndarray, Ts: float, starts: np.ndarray) -> list[tuple[int, int
     return excursion_blocks(y, Ts, starts)
 
 
+def _split_gain(c1: np.ndarray, a: int, b: int, m: int) -> tuple[float, int]:
+    """The largest decrease of the squared error of one level on [a, b) by two levels, and where.
+
+    ``c1``: the cumulative sum of y with a leading 0; pieces of at least ``m`` samples.
+    The first largest wins a tie (a deterministic order).
+    """
+    k = np.arange(a + m, b - m + 1)
+    if k.size == 0:
+        return 0.0, -1
+    nl, nr = k - a, b - k
+    sl, sr = c1[k] - c1[a], c1[b] - c1[k]
+    whole = (c1[b] - c1[a]) ** 2 / (b - a)
+    gain = sl ** 2 / nl + sr ** 2 / nr - whole
+    i = int(np.argmax(gain))
+    return float(gain[i]), int(k[i])
+
+
+def _step_blocks(y: np.ndarray, Ts: float, starts: np.ndarray) -> list[tuple[int, int]]:
+    """Time windows where ``y`` sits at another constant level: a load that comes and goes.
+
+    ``y`` is modelled as piecewise constant in time, the change points found by binary
+    segmentation (each recording segment its own piece to start with; pieces of at least
+    ``BLOCK_MIN_S``) and their number k chosen by the Bayesian information criterion,
+    ``n_eff·ln(RSS_k/n) + 2k·ln(n_eff)`` (a level and a place per change), with
+    ``n_eff = 2·B·T`` the independent samples of a signal low-passed to the band B over T
+    seconds.  This finds a load that is on half of the time — pulses all through a run —
+    where :func:`residuals.excursion_blocks`, which needs a quiet majority, sees none.
+    The windows are the pieces at the level held for less of the time (the pieces' levels
+    split in two by :func:`_two_levels`), leaving out those within ``SEGMENT_EDGE_S`` of a
+    segment's ends (filter edges, restart transients).  Whether they are a load is the
+    caller's test (:func:`_blocks_test`: significant beyond the state families, and
+    independent of them).
+    """
+    n = y.size
+    y = np.asarray(y, dtype=float)
+    c1 = np.concatenate([[0.0], np.cumsum(y)])
+    c2 = np.concatenate([[0.0], np.cumsum(y * y)])
+    bounds = list(np.append(np.flatnonzero(starts), n))
+    m = max(int(round(BLOCK_MIN_S / Ts)), 2)
+    per_s = 2.0 * DISTURBANCE_BAND_HZ  # independent samples a second
+    n_eff = max(per_s * n * Ts, 2.0)
+    pieces = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+
+    def rss(ps) -> float:
+        return float(sum((c2[b] - c2[a]) - (c1[b] - c1[a]) ** 2 / (b - a) for a, b in ps))
+
+    gains = {p: _split_gain(c1, *p, m) for p in pieces}
+    path = [list(pieces)]
+    k_max = int(n * Ts / (2.0 * BLOCK_MIN_S))
+    for _ in range(k_max):
+        p = max(pieces, key=lambda q: (gains[q][0], -q[0]))  # ties: the earliest piece
+        g, k = gains[p]
+        if k < 0 or g <= 0.0:
+            break
+        pieces.remove(p)
+        for q in ((p[0], k), (k, p[1])):
+            pieces.append(q)
+            gains[q] = _split_gain(c1, *q, m)
+        path.append(sorted(pieces))
+    bic = [n_eff * math.log(max(rss(ps), 1e-300) / n) + 2.0 * j * math.log(n_eff) for j, ps in enumerate(path)]
+    best = path[int(np.argmin(bic))]
+    if len(best) == len(path[0]):
+        return []
+    levels = np.array([(c1[b] - c1[a]) / (b - a) for a, b in best])
+    lengths = np.array([b - a for a, b in best], dtype=float)
+    on = _two_levels(levels, lengths)
+    edge = int(round(SEGMENT_EDGE_S / Ts))
+    seg_of = np.searchsorted(bounds, np.arange(n), side="right") - 1
+    out: list[tuple[int, int]] = []
+    for (a, b), hit in zip(best, on):
+        if hit and out and out[-1][1] == a:  # a window split in two pieces is one window
+            out[-1] = (out[-1][0], b)
+        elif hit:
+            out.append((a, b))
+    return [(a, b) for a, b in out if a - bounds[seg_of[a]] >= edge and bounds[seg_of[a] + 1] - b >= edge]
+
+
+def _two_levels(levels: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Which pieces are at the load's level: the two duration-weighted means that fit the
+    pieces' levels best (1-D 2-means, exact by sorting), the load the one held for less time."""
+    order = np.argsort(levels, kind="stable")
+    lv, ln = levels[order], lengths[order]
+    w1, s1 = np.cumsum(ln)[:-1], np.cumsum(ln * lv)[:-1]
+    w2, s2 = ln.sum() - w1, float(ln @ lv) - s1
+    between = s1 ** 2 / w1 + s2 ** 2 / w2  # what a split explains; the within-cluster SS is the rest
+    cut = int(np.argmax(between)) + 1
+    low = np.zeros(levels.size, dtype=bool)
+    low[order[:cut]] = True
+    load_low = ln[:cut].sum() < ln[cut:].sum()
+    return low if load_low else ~low
+
+
 def _state_blocks(wl: np.ndarray, A: np.ndarray, Ts: float,
                   starts: np.ndarray) -> tuple[list[tuple[int, int]], np.ndarray]:
     """Blocks of ``wl`` the state regressors ``A`` leave, found robustly; (blocks, state fit).
@@ -136,14 +229,19 @@ def _state_blocks(wl: np.ndarray, A: np.ndarray, Ts: float,
     Fitted on every sample, the state families absorb part of a load that comes and goes
     (a position sinusoid lines up with pulses), and what they leave no longer shows the
     blocks.  So the blocks are first looked for in ``wl`` itself (or, when none stand out
-    there, in what the state fit on all samples leaves), then the state families (with a
+    there, in what the state fit on all samples leaves; when none stand out there either,
+    as the windows of a piecewise-constant level, :func:`_step_blocks`), then the state families (with a
     constant) are fitted *outside* the blocks only and the blocks looked for again in what
     they leave, until the blocks stop changing: a least-squares fit with the blocks as
     outliers.
     """
     A1 = np.column_stack([A, np.ones(wl.size)])
     fit = _explained(wl, A1)[1]
+    find = _blocks
     spans = _blocks(wl, Ts, starts) or _blocks(wl - fit, Ts, starts)
+    if not spans:  # no quiet majority to stand out of: a load on about half of the time?
+        find = _step_blocks
+        spans = _step_blocks(wl - fit, Ts, starts)
     for _ in range(BLOCK_ROUNDS):
         out = np.ones(wl.size, dtype=bool)
         for i, j in spans:
@@ -151,7 +249,7 @@ def _state_blocks(wl: np.ndarray, A: np.ndarray, Ts: float,
         if np.count_nonzero(out) <= A1.shape[1]:
             break
         fit = A1 @ _lstsq(A1[out], wl[out])
-        new = _blocks(wl - fit, Ts, starts)
+        new = find(wl - fit, Ts, starts)
         if new == spans:
             break
         spans = new
@@ -283,7 +381,7 @@ def analyse_disturbance(w: np.ndarray, x_r: np.ndarray, x: np.ndarray, v_r: np.n
     # the family of state variables that explains most does
     states = {k: v for k, v in explained.items() if k != "time_blocks"}
     res["dominant"] = max(states, key=states.get)
-    res["blocks"] = blocks[:20]
+    res["blocks"] = blocks
     res["blocks_time_share"] = float(time_share)
     res["time_localised"] = bool(
         blocks and explained["time_blocks"] >= BLOCK_MIN_SHARE and time_share <= BLOCK_MAX_TIME_SHARE
