@@ -12,7 +12,7 @@ from typing import Sequence
 
 from agent.outputs import write_json
 from core.errors import InputError
-from ident.tuning import Gains, Test, Tuning, tune
+from ident.tuning import Gains, Criterion, Tuning, tune
 from ident.tuning.controllers import GAIN_NAMES
 from ident.virtual_machine import load_virtual_machine
 
@@ -52,9 +52,9 @@ def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Seque
         plane = tuple(axes) if axes else tuple(a for a in ("X", "Y") if a in vm.axes)
         if len(plane) != 2:
             raise InputError.about("axes", f"the ballbar needs two axes; {vm.name} has {', '.join(vm.axes)}")
-        test = Test.ballbar(vm, plane, radius, feed)
+        test = Criterion.ballbar(vm, plane, radius, feed)
     else:
-        test = Test.program(vm, programs)
+        test = Criterion.program(vm, programs)
     joints: dict[str, int] = {}
     if controller == "linuxcnc-pid":
         if ini is None:

@@ -8,10 +8,10 @@ eq. 3.4/3.5), :mod:`.plant` (closed loop → plant), :mod:`.margins`, :mod:`.fig
 """
 
 from ident.tuning.controllers import CONTROLLER_FORMS, Gains, closed_loop
-from ident.tuning.figures import Test
+from ident.tuning.figures import Criterion
 from ident.tuning.margins import Margins, margins
 from ident.tuning.plant import Plant, derive_plant, match_coefficients
 from ident.tuning.proposal import Tuning, TuningRefused, tune
 
-__all__ = ["CONTROLLER_FORMS", "Gains", "closed_loop", "Test", "Margins", "margins", "Plant", "derive_plant",
+__all__ = ["CONTROLLER_FORMS", "Gains", "closed_loop", "Criterion", "Margins", "margins", "Plant", "derive_plant",
            "match_coefficients", "Tuning", "TuningRefused", "tune"]

@@ -25,11 +25,11 @@ from ident.tuning.loop import simulate_loop
 from ident.tuning.plant import Plant
 from ident.virtual_machine import VirtualMachine
 
-__all__ = ["Test", "predicted_figure", "follow"]
+__all__ = ["Criterion", "predicted_figure", "follow"]
 
 
 @dataclass(frozen=True)
-class Test:
+class Criterion:
     """What a tuning is scored on: the ballbar pair (radius, feed) or a list of programs."""
 
     kind: str  # "ballbar" | "program"
@@ -41,7 +41,7 @@ class Test:
 
     @classmethod
     def ballbar(cls, vm: VirtualMachine, axes: tuple[str, str], radius: float, feed: float,
-                centre: tuple[float, float] = (0.0, 0.0)) -> "Test":
+                centre: tuple[float, float] = (0.0, 0.0)) -> "Criterion":
         from gcode_gen.toolpaths import circle
         from ident.synthetic_ballbar import START_DEG
 
@@ -50,7 +50,7 @@ class Test:
         return cls("ballbar", runs, tuple(axes), radius, feed, tuple(centre))
 
     @classmethod
-    def program(cls, vm: VirtualMachine, programs: Sequence[ProgramLike]) -> "Test":
+    def program(cls, vm: VirtualMachine, programs: Sequence[ProgramLike]) -> "Criterion":
         run = vm.command(list(programs))
         return cls("program", (run,), tuple(a for a in run.commanded if a in vm.axes))
 
@@ -84,7 +84,7 @@ def follow(run: CommandedRun, gains: Mapping[str, Gains], plants: Mapping[str, P
     return actual, ratio
 
 
-def predicted_figure(test: Test, gains: Mapping[str, Gains], plants: Mapping[str, Plant]) -> tuple[float, float]:
+def predicted_figure(test: Criterion, gains: Mapping[str, Gains], plants: Mapping[str, Plant]) -> tuple[float, float]:
     """(figure in µm, max |u|/limit) of ``test`` (module docstring)."""
     if test.kind == "ballbar":
         from ident.ballbar import analyse_ballbar, ballbar_run

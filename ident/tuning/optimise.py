@@ -37,8 +37,8 @@ __all__ = ["Design", "design_gains", "admissible", "search", "OMEGA_HZ", "ZETAS"
 
 OMEGA_HZ = tuple(float(v) for v in np.geomspace(5.0, 60.0, 8))
 ZETAS = (0.8, 1.0)
-RATIOS = (0.1, 0.4)
-FF_FRACTIONS = (0.0, 0.5, 0.8, 1.0)
+RATIOS = (0.1, 0.4, 1.0)
+FF_FRACTIONS = (0.0, 0.5, 0.8, 0.9, 0.95, 1.0)
 
 
 @dataclass(frozen=True)

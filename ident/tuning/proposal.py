@@ -21,7 +21,7 @@ import numpy as np
 
 from core.errors import InputError
 from ident.tuning.controllers import Gains
-from ident.tuning.figures import Test, predicted_figure
+from ident.tuning.figures import Criterion, predicted_figure
 from ident.tuning.margins import Margins
 from ident.tuning.optimise import Design, search, violations
 from ident.tuning.plant import Plant, derive_plant
@@ -89,7 +89,7 @@ def _lag_ms(gains: Gains, plant: Plant, Ts: float, f_hz: float) -> float:
     return -1e3 * math.atan2(co, s) / (2 * math.pi * f_hz)
 
 
-def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Test,
+def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
          proposed: Mapping[str, Gains] | None = None) -> Tuning:
     """Propose (or check ``proposed``) gains for the axes of ``test`` on ``vm`` (module docstring).
 
