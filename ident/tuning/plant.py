@@ -119,8 +119,15 @@ def derive_plant(model: AxisModel, gains: Gains, axis: str = "X") -> Plant:
     # the fit metric's scale (SPEC §5): rms of the predicted tracking error
     norm = float(np.sqrt(np.mean((x_r - target) ** 2))) or 1.0
 
+    # Friction as the identification saw it: d0/d1 over the coefficient-matched kj.  The
+    # continuous model's gain bias scales d0, d1 and the gains alike (docs/linuxcnc.md), so
+    # the ratio is unbiased; only a model whose friction has the wrong signs (d0 <= 0 or
+    # d1 >= 0: it did not resolve the friction) has the friction fitted with kj and bj.
+    fixed = model.model.d0 > 0 > model.model.d1
+
     def simulate(z: np.ndarray) -> np.ndarray:
-        kj, bj, dp, dm = math.exp(z[0]), z[1], z[2], z[3]
+        kj, bj = math.exp(z[0]), z[1]
+        dp, dm = (start.d_plus, start.d_minus) if fixed else (z[2], z[3])
         out = []
         for a, b in zip(bounds[:-1], bounds[1:]):
             x, _ = simulate_loop(x_r[a:b], Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, kj=kj, bj=bj,
@@ -137,6 +144,7 @@ def derive_plant(model: AxisModel, gains: Gains, axis: str = "X") -> Plant:
     ub = np.array([z0[0] + math.log(4.0), max(10 * start.bj, 0.2 * start.kj * max(Kd, 1e-6), 50.0),
                    10 * dscale, 0.0])
     z0 = np.clip(z0, lb, ub)
-    fit = bounded_lm(resid, z0, lb, ub, max_iter=40)
-    z = fit.z
-    return Plant(math.exp(z[0]), float(z[1]), float(z[2]), float(z[3]), start.gap_mm, start.delay_s)
+    n = 2 if fixed else 4
+    z = bounded_lm(resid, z0[:n], lb[:n], ub[:n], max_iter=40).z
+    dp, dm = (start.d_plus, start.d_minus) if fixed else (float(z[2]), float(z[3]))
+    return Plant(math.exp(z[0]), float(z[1]), dp, dm, start.gap_mm, start.delay_s)
