@@ -155,3 +155,49 @@ def test_tuned_gains_proven_on_the_virtual_cnc(identified, name):
         pytest.xfail(f"P-PI: measured {after:.1f} µm vs predicted {result.predicted_after:.1f} µm")
     assert after == pytest.approx(result.predicted_after, rel=0.10)
     assert abs(result.lag_ms["X"] - result.lag_ms["Y"]) < 0.01  # matched: no servo-mismatch ellipse
+
+
+DETUNED = """name = "detuned-xy"
+description = "fadal-pid with a soft, mismatched Y loop"
+base = "fadal-pid"
+
+[axes.Y]
+Kp = 20.0
+Ki = 60.0
+Kd = 0.10
+"""
+
+
+@pytest.mark.slow
+def test_cli_tunes_a_detuned_mismatched_machine(tmp_path):
+    """generate → simulate (TOML machine) → identify → tune → the tuned TOML run on the virtual CNC."""
+    def agent(*args: str) -> str:
+        p = subprocess.run([sys.executable, "-m", "agent.cli", *args], capture_output=True, text=True, timeout=600,
+                           cwd=tmp_path)
+        assert p.returncode == 0, p.stderr
+        return p.stdout
+
+    (tmp_path / "detuned.toml").write_text(DETUNED)
+    agent("generate", "--axes", "X,Y", "--seed", "3", "-o", "prog")
+    agent("simulate", "prog/ident_low.nc", "prog/ident_high.nc", "--machine", "detuned.toml", "--seed", "3",
+          "-o", "run.mcap")
+    agent("identify", "run.mcap", "--json", "result.json", "--no-diagnose")
+    out = agent("tune", "--machine", "result.json", "--controller", "pid", "--ballbar", "--radius", str(RADIUS),
+                "--feed", str(FEED), "--gain", "X.Kp=44.356", "--gain", "X.Ki=316.83", "--gain", "X.Kd=0.1901",
+                "--gain", "Y.Kp=20", "--gain", "Y.Ki=60", "--gain", "Y.Kd=0.1", "--json", "tune.json")
+    assert out.startswith("predicted circularity: before ")
+    doc = json.loads((tmp_path / "tune.json").read_text())
+    assert set(doc) >= {"gains", "margins", "predicted_before", "predicted_after"}
+    tuned = "\n".join(f"[axes.{a}]\n" + "\n".join(f"{k} = {v!r}" for k, v in g["after"].items())
+                      for a, g in doc["gains"].items())
+    (tmp_path / "tuned.toml").write_text('name = "tuned"\nbase = "fadal-pid"\n\n' + tuned + "\n")
+    before = _measured_circularity(virtual_cnc.load_machine(tmp_path / "detuned.toml"))
+    after = _measured_circularity(virtual_cnc.load_machine(tmp_path / "tuned.toml"))
+    pred_b, pred_a = doc["predicted_before"]["circularity_um"], doc["predicted_after"]["circularity_um"]
+    print(f"detuned: predicted {pred_b:.2f} -> {pred_a:.2f} um, measured {before:.2f} -> {after:.2f} um")
+    assert pred_a <= 0.7 * pred_b and after <= 0.7 * before
+    assert before == pytest.approx(pred_b, rel=0.10)
+    assert after == pytest.approx(pred_a, rel=0.10)
+    for a in ("X", "Y"):
+        m = doc["margins"][a]["after"]
+        assert m["phase_margin_deg"] >= 45 and m["gain_margin_db"] >= 6
