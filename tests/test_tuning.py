@@ -201,3 +201,33 @@ def test_cli_tunes_a_detuned_mismatched_machine(tmp_path):
     for a in ("X", "Y"):
         m = doc["margins"][a]["after"]
         assert m["phase_margin_deg"] >= 45 and m["gain_margin_db"] >= 6
+
+
+def test_cli_prints_the_ini_lines_to_change_with_backlash_from_the_gap(tmp_path):
+    """LinuxCNC form from the fixture INI, a part program, an accepted 20 µm gap: the printed
+    diff is the JSON's, changes only [JOINT_0] gain lines and adds BACKLASH; the INI is untouched."""
+    rec = virtual_cnc.simulate(gcode_gen.generate(["X"], seed=3), "fadal-pid", seed=3)
+    doc = json.loads(ident.identify(rec, diagnose=False).to_json())
+    doc["axes"]["X"]["virtual_model"]["effects"] = {"backlash": {"gap_mm": 0.02}}
+    (tmp_path / "result.json").write_text(json.dumps(doc))
+    ini = tmp_path / "machine.ini"
+    ini.write_text((ROOT / "fixtures/linuxcnc/machine.ini").read_text())
+    original = ini.read_text()
+    gcode_gen.save_programs(gcode_gen.generate(["X"], seed=2, n_low=5, n_high=20), "linuxcnc", tmp_path / "part")
+    p = subprocess.run([sys.executable, "-m", "agent.cli", "tune", "--machine", "result.json", "--ini", "machine.ini",
+                        "--program", "part/ident_high.ngc", "--json", "tune.json"],
+                       capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    out = json.loads((tmp_path / "tune.json").read_text())
+    diff = out["ini_diff"]
+    lines = p.stdout.splitlines()
+    start = lines.index("--- a/machine.ini")
+    assert lines[start:start + len(diff)] == diff
+    assert ini.read_text() == original
+    changed = [ln for ln in diff if ln[:1] in "+-" and not ln.startswith(("---", "+++"))]
+    assert "+BACKLASH = 0.02" in changed
+    keys = {ln[1:].split("=")[0].strip() for ln in changed}
+    assert keys <= {"P", "I", "D", "FF1", "FF2", "BACKLASH"} and {"P", "FF2"} <= keys
+    assert out["gains"]["X"]["after"]["BACKLASH"] == 0.02
+    after = out["margins"]["X"]["after"]
+    assert after["phase_margin_deg"] >= 45 and after["gain_margin_db"] >= 6 and after["step_overshoot"] <= 0.001

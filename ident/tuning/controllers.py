@@ -87,14 +87,19 @@ class Gains:
         return kind, v["Kp"], v["Ki"], v["Kd"], v["Kv"], v["Ka"]
 
     @property
+    def ff0(self) -> float:
+        """Position feed-forward FF0 [V/mm] (LinuxCNC pid only; 0 for the other forms)."""
+        return self.values.get("FF0", 0.0) if self.form == "linuxcnc-pid" else 0.0
+
+    @property
     def timing(self) -> Timing:
         return TIMINGS[self.form]
 
-    def with_law(self, Kp: float, Ki: float, Kd: float, Kv: float, Ka: float) -> "Gains":
-        """A copy with the loop law's five gains replaced (names mapped back to the form's)."""
+    def with_law(self, Kp: float, Ki: float, Kd: float, Kv: float, Ka: float, Kf0: float = 0.0) -> "Gains":
+        """A copy with the loop law's gains replaced (names mapped back to the form's; Kf0 = FF0)."""
         v = dict(self.values)
         if self.form == "linuxcnc-pid":
-            v.update(P=Kp, I=Ki, D=Kd, FF1=Kv, FF2=Ka)
+            v.update(P=Kp, I=Ki, D=Kd, FF0=Kf0, FF1=Kv, FF2=Ka)
         else:
             v.update(Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka)
         return replace(self, values=v)

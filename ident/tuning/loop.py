@@ -10,8 +10,8 @@ plant is recovered, and the gains are judged, on this sampled loop.
 Per servo tick k (the laws of thesis Fig. 3.2, e = x_r − x, v the feedback velocity):
 
 * P-PI (``ppi``):  e_v = Kp·(e + Kv·ẋ_r + Ka·ẍ_r) − v,  u = Kd·e_v + Ki·Ts·Σe_v;
-* PID (``pid``):   u = Kp·e + Ki·Ts·Σe + Kd·(ẋ_r − v) + Kv·ẋ_r + Ka·ẍ_r  (LinuxCNC pid:
-  Kp = P, Ki = I, Kd = D, Kv = FF1, Ka = FF2);
+* PID (``pid``):   u = Kp·e + Ki·Ts·Σe + Kd·(ẋ_r − v) + Kf0·x_r + Kv·ẋ_r + Ka·ẍ_r
+  (LinuxCNC pid: Kp = P, Ki = I, Kd = D, Kf0 = FF0, Kv = FF1, Ka = FF2);
 
 u clipped to ±u_max (integration stops while clipped), applied after ``delay`` whole
 periods and held.  Plant, per unit inertia (thesis §3.2, eq. 3.2), x in mm::
@@ -49,7 +49,7 @@ class Timing:
 
 
 @njit(cache=True)
-def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, u_max, kj, bj, dp, dm, central, meas_vel, delay,
+def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, Kf0, u_max, kj, bj, dp, dm, central, meas_vel, delay,
           out_x, out_u):
     n = xr.shape[0]
     h = Ts / nsub
@@ -82,7 +82,7 @@ def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, u_max, kj, bj, dp, dm, central,
         else:
             w = e
             i_new = integ + Ts * e
-            u = Kp * e + Ki * i_new + Kd * (xrd - vel) + Kv * xrd + Ka * xrdd
+            u = Kp * e + Ki * i_new + Kd * (xrd - vel) + Kf0 * xr[k] + Kv * xrd + Ka * xrdd
         if u > u_max:
             u = u_max
             if w <= 0.0:
@@ -129,7 +129,7 @@ def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, u_max, kj, bj, dp, dm, central,
 
 
 def simulate_loop(x_r: np.ndarray, Ts: float, *, kind: str, Kp: float, Ki: float, Kd: float,
-                  Kv: float = 0.0, Ka: float = 0.0, kj: float, bj: float, d_plus: float = 0.0,
+                  Kv: float = 0.0, Ka: float = 0.0, Kf0: float = 0.0, kj: float, bj: float, d_plus: float = 0.0,
                   d_minus: float = 0.0, u_max: float = np.inf, timing: Timing = Timing(),
                   substeps: int = 10) -> tuple[np.ndarray, np.ndarray]:
     """Actual position x [mm] and control u [V], each (N,), of the sampled loop following ``x_r``.
@@ -146,6 +146,6 @@ def simulate_loop(x_r: np.ndarray, Ts: float, *, kind: str, Kp: float, Ki: float
     x = np.empty_like(xr)
     u = np.empty_like(xr)
     _loop(xr, float(Ts), int(substeps), kind == "ppi", float(Kp), float(Ki), float(Kd), float(Kv), float(Ka),
-          float(u_max) if np.isfinite(u_max) else 1e300, float(kj), float(bj), float(d_plus), float(d_minus),
+          float(Kf0), float(u_max) if np.isfinite(u_max) else 1e300, float(kj), float(bj), float(d_plus), float(d_minus),
           bool(timing.central_reference), bool(timing.measured_velocity), int(timing.delay), x, u)
     return x, u

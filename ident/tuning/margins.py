@@ -152,7 +152,7 @@ def step_overshoot(gains: Gains, plant: Plant, Ts: float) -> float:
         from dataclasses import replace
 
         timing = replace(timing, delay=timing.delay + int(round(plant.delay_s / Ts)))
-    x, _ = simulate_loop(xr, Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, kj=plant.kj, bj=plant.bj,
+    x, _ = simulate_loop(xr, Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, Kf0=gains.ff0, kj=plant.kj, bj=plant.bj,
                          timing=timing)
     if not np.all(np.isfinite(x)) or abs(x[-1] - STEP_MM) > 0.02 * STEP_MM:
         return math.inf

@@ -38,7 +38,9 @@ __all__ = ["Design", "design_gains", "admissible", "search", "OMEGA_HZ", "ZETAS"
 OMEGA_HZ = tuple(float(v) for v in np.geomspace(5.0, 60.0, 8))
 ZETAS = (0.8, 1.0)
 RATIOS = (0.1, 0.4, 1.0)
-FF_FRACTIONS = (0.0, 0.5, 0.8, 0.9, 0.95, 1.0)
+FF_FRACTIONS = (0.0, 0.5, 0.8, 0.9, 0.95, 1.0, 1.1, 1.2)
+#: Leads tried, in servo periods, where the form has FF0 to complete them (LinuxCNC pid).
+LEADS = (0.0, 1.0, 2.0, 3.0)
 
 
 @dataclass(frozen=True)
@@ -49,6 +51,7 @@ class Design:
     zeta: float
     ratio: float
     ff: float
+    lead: float = 0.0  # s: the lag the feed-forward concedes (module docstring)
 
 
 def design_gains(template: Gains, plant: Plant, d: Design) -> Gains | None:
@@ -63,7 +66,10 @@ def design_gains(template: Gains, plant: Plant, d: Design) -> Gains | None:
         return None
     if kind == "pid":
         Kp, Ki = a2 / kj, a3 / kj
-        Kv, Ka = d.ff * bj / kj, d.ff / kj
+        # x = x_r delayed by the lead is what the loop settles to: the feedback it then sees
+        # (P·lead·ẋ_r, D·lead·ẍ_r, I·lead·x_r) is taken off the feed-forwards
+        Kv, Ka = d.ff * bj / kj - Kp * d.lead, d.ff / kj - Kd * d.lead
+        return template.with_law(Kp, Ki, Kd, Kv, Ka, -Ki * d.lead)
     else:
         disc = (a2 / kj) ** 2 - 4 * Kd * a3 / kj
         if disc < 0:
@@ -137,9 +143,12 @@ def search(templates: Mapping[str, Gains], plants: Mapping[str, Plant], Ts: floa
         if u_ratio <= 1.0 and math.isfinite(fig) and (best is None or fig < best[0]):
             best = (fig, d, gains)
 
+    forms = {t.form for t in templates.values()}
+    leads = [k * Ts for k in LEADS] if forms == {"linuxcnc-pid"} else [0.0]
     for d in admissible(templates, plants, Ts, resonances):
         for ff in FF_FRACTIONS:
-            consider(Design(d.omega_hz, d.zeta, d.ratio, ff))
+            for lead in leads:
+                consider(Design(d.omega_hz, d.zeta, d.ratio, ff, lead))
     if best is None:
         return None
     return best[1], best[2], best[0]

@@ -130,7 +130,7 @@ def derive_plant(model: AxisModel, gains: Gains, axis: str = "X") -> Plant:
         dp, dm = (start.d_plus, start.d_minus) if fixed else (z[2], z[3])
         out = []
         for a, b in zip(bounds[:-1], bounds[1:]):
-            x, _ = simulate_loop(x_r[a:b], Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, kj=kj, bj=bj,
+            x, _ = simulate_loop(x_r[a:b], Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, Kf0=gains.ff0, kj=kj, bj=bj,
                                  d_plus=dp, d_minus=dm, u_max=gains.u_max, timing=timing)
             out.append(x)
         return np.concatenate(out)
