@@ -22,6 +22,9 @@ def tune(
     axes: Optional[str] = typer.Option(None, "--axes", help="Ballbar plane, two axis letters (default X,Y)."),
     u_max: float = typer.Option(10.0, "--u-max", help="Output limit, V, for p-pi/pid (LinuxCNC: MAX_OUTPUT)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write gains, margins and predictions as JSON."),
+    plant_integration: str = typer.Option("continuous", "--plant-integration",
+                                          help="continuous (a real drive) | euler (the headless LinuxCNC test "
+                                               "machine's HAL plant, one Euler step per servo period)."),
 ) -> None:
     """Propose controller gains (and compensation) from the identified drives; prints before/after and the INI diff.
 
@@ -35,9 +38,12 @@ def tune(
     check_suffix(json_out, "--json", ".json")
     if controller not in CONTROLLER_FORMS:
         raise InputError(f"--controller {controller!r}: one of {', '.join(CONTROLLER_FORMS)}")
+    if plant_integration not in ("continuous", "euler"):
+        raise InputError(f"--plant-integration {plant_integration!r}: continuous or euler")
     plane = [a.strip().upper() for a in axes.split(",") if a.strip()] if axes else None
     result, diff = tune_files(machine, controller=controller, ini=ini, gains=gain, propose=propose, programs=program,
-                              ballbar=ballbar, radius=radius, feed=feed, axes=plane, u_max=u_max, json_out=json_out)
+                              ballbar=ballbar, radius=radius, feed=feed, axes=plane, u_max=u_max, json_out=json_out,
+                              integration=plant_integration)
     what = "circularity" if result.test == "circularity_um" else "max contour error"
     change = 100.0 * (result.predicted_after / result.predicted_before - 1.0) if result.predicted_before else 0.0
     typer.echo(f"predicted {what}: before {result.predicted_before:.2f} µm, after {result.predicted_after:.2f} µm "

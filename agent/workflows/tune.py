@@ -43,7 +43,8 @@ def parse_gains(form: str, axes: Sequence[str], assignments: Sequence[str], flag
 
 def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Sequence[str], propose: Sequence[str],
                programs: Sequence[Path], ballbar: bool, radius: float, feed: float, axes: Sequence[str] | None,
-               u_max: float, json_out: Path | None) -> tuple[Tuning, list[str]]:
+               u_max: float, json_out: Path | None,
+               integration: str = "continuous") -> tuple[Tuning, list[str]]:
     """Run the tuning; returns it and the INI diff lines (empty without an INI)."""
     vm = load_virtual_machine(machine)
     if bool(programs) == bool(ballbar):
@@ -80,7 +81,7 @@ def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Seque
     if propose:
         changes = parse_gains(controller, test.axes, propose, "--propose")
         proposed = {a: Gains(controller, {**current[a].values, **changes[a]}, current[a].u_max) for a in test.axes}
-    result = tune(vm, current, test, proposed)
+    result = tune(vm, current, test, proposed, integration)
     diff: list[str] = []
     if ini is not None:
         from ident.tuning.ini import ini_diff

@@ -40,12 +40,13 @@ GAIN_NAMES = {
 
 #: How each form samples (ident.tuning.loop.Timing): the virtual CNC's laws take the
 #: reference derivatives by central differences and the feedback velocity by a backward
-#: difference, applying u at once; LinuxCNC's pid differentiates the command backwards,
-#: and its output acts in the next period (the thread runs the plant before pid).
+#: difference; LinuxCNC's pid differentiates the command backwards and reads the drive's
+#: velocity (feedback-deriv).  Both hold u over the next period (the servo thread runs the
+#: plant before pid, so pid's output of period k drives period k+1: a ZOH, no more delay).
 TIMINGS = {
     "p-pi": Timing(central_reference=True, measured_velocity=False, delay=0),
     "pid": Timing(central_reference=True, measured_velocity=False, delay=0),
-    "linuxcnc-pid": Timing(central_reference=False, measured_velocity=True, delay=1),
+    "linuxcnc-pid": Timing(central_reference=False, measured_velocity=True, delay=0),
 }
 
 

@@ -75,7 +75,8 @@ def follow(run: CommandedRun, gains: Mapping[str, Gains], plants: Mapping[str, P
         xs, us = [], []
         for s0, s1 in zip(starts[:-1], starts[1:]):
             x, u = simulate_loop(xr[s0:s1], run.Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, Kf0=g.ff0, kj=p.kj,
-                                 bj=p.bj, d_plus=p.d_plus, d_minus=p.d_minus, u_max=g.u_max, timing=timing)
+                                 bj=p.bj, d_plus=p.d_plus, d_minus=p.d_minus, u_max=g.u_max, timing=timing,
+                                 integration=p.integration)
             xs.append(x)
             us.append(u)
         actual[a] = np.concatenate(xs)

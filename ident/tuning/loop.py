@@ -50,7 +50,7 @@ class Timing:
 
 @njit(cache=True)
 def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, Kf0, u_max, kj, bj, dp, dm, central, meas_vel, delay,
-          out_x, out_u):
+          euler, out_x, out_u):
     n = xr.shape[0]
     h = Ts / nsub
     x = xr[0]
@@ -99,6 +99,16 @@ def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, Kf0, u_max, kj, bj, dp, dm, cen
             queue[j] = queue[j + 1]
         queue[delay] = u
         ua = queue[0]
+        if euler:
+            # one semi-implicit Euler step; friction as the force that would stop the body
+            # within the step, clamped to the Coulomb band (fixtures/linuxcnc/machine.hal)
+            a_drive = kj * ua - bj * v
+            f = a_drive + v / Ts
+            lo, hi = kj * dm, kj * dp
+            f = hi if f > hi else (lo if f < lo else f)
+            v = v + (a_drive - f) * Ts
+            x += v * Ts
+            continue
         for _ in range(nsub):
             if v > 0.0:
                 s = 1.0
@@ -131,7 +141,7 @@ def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, Kf0, u_max, kj, bj, dp, dm, cen
 def simulate_loop(x_r: np.ndarray, Ts: float, *, kind: str, Kp: float, Ki: float, Kd: float,
                   Kv: float = 0.0, Ka: float = 0.0, Kf0: float = 0.0, kj: float, bj: float, d_plus: float = 0.0,
                   d_minus: float = 0.0, u_max: float = np.inf, timing: Timing = Timing(),
-                  substeps: int = 10) -> tuple[np.ndarray, np.ndarray]:
+                  substeps: int = 10, integration: str = "continuous") -> tuple[np.ndarray, np.ndarray]:
     """Actual position x [mm] and control u [V], each (N,), of the sampled loop following ``x_r``.
 
     Parameters
@@ -141,11 +151,15 @@ def simulate_loop(x_r: np.ndarray, Ts: float, *, kind: str, Kp: float, Ki: float
     kj : control-to-acceleration gain K/J, mm/(V·s²); bj : viscous pole B/J, 1/s.
     d_plus, d_minus : Coulomb friction as control equivalents, V (d⁺ ≥ 0 ≥ d⁻).
     u_max : output limit, V (inf: none).
+    integration : "continuous" (the drive's physics, integrated finely) or "euler" (one
+        semi-implicit Euler step per period, v(k) = v(k−1) + a·Ts, x(k) = x(k−1) + v(k)·Ts:
+        the plant of the headless LinuxCNC test machine, fixtures/linuxcnc).
     """
     xr = np.ascontiguousarray(np.asarray(x_r, dtype=float))
     x = np.empty_like(xr)
     u = np.empty_like(xr)
     _loop(xr, float(Ts), int(substeps), kind == "ppi", float(Kp), float(Ki), float(Kd), float(Kv), float(Ka),
           float(Kf0), float(u_max) if np.isfinite(u_max) else 1e300, float(kj), float(bj), float(d_plus), float(d_minus),
-          bool(timing.central_reference), bool(timing.measured_velocity), int(timing.delay), x, u)
+          bool(timing.central_reference), bool(timing.measured_velocity), int(timing.delay),
+          integration == "euler", x, u)
     return x, u

@@ -7,7 +7,8 @@ a ZOH over each period Ts, its sampled position and velocity responses are
     P_x(z) = kj/bj · [ (Ts − (1−a)/bj)·z + ((1−a)/bj − a·Ts) ] / ((z − 1)(z − a))
     P_v(z) = kj/bj · (1 − a) / (z − a)                      (bj → 0: limits taken)
 
-and the loop gain of each form (e the position error, the feed-forwards outside the loop)::
+(with the headless LinuxCNC machine's semi-implicit Euler plant, ``integration="euler"``:
+P_v = kj·Ts/(z − (1 − bj·Ts)), P_x = Ts·z/(z − 1)·P_v) and the loop gain of each form (e the position error, the feed-forwards outside the loop)::
 
     PID:   L = z^−d · [ (Kp + Ki·Ts·z/(z−1))·P_x + Kd·V ]
     P-PI:  L = z^−d · (Kd + Ki·Ts·z/(z−1)) · (Kp·P_x + V)
@@ -95,7 +96,10 @@ def open_loop(gains: Gains, plant: Plant, Ts: float, f_hz: np.ndarray,
     f = np.asarray(f_hz, float)
     z = np.exp(2j * math.pi * f * Ts)
     kj, bj = plant.kj, plant.bj
-    if bj * Ts > 1e-9:
+    if plant.integration == "euler":  # v(k) = (1 − bj·Ts)·v(k−1) + kj·Ts·u(k−1), x(k) = x(k−1) + Ts·v(k)
+        Pv = kj * Ts / (z - (1 - bj * Ts))
+        Px = Ts * z / (z - 1) * Pv
+    elif bj * Ts > 1e-9:
         a = math.exp(-bj * Ts)
         Px = kj / bj * ((Ts - (1 - a) / bj) * z + ((1 - a) / bj - a * Ts)) / ((z - 1) * (z - a))
         Pv = kj / bj * (1 - a) / (z - a)
@@ -117,9 +121,19 @@ def open_loop(gains: Gains, plant: Plant, Ts: float, f_hz: np.ndarray,
 
 
 def margins(gains: Gains, plant: Plant, Ts: float, resonance: tuple[float, float] | None = None) -> Margins:
-    """Margins of one axis, on 4000 log-spaced frequencies from 0.01 Hz to 0.999 × Nyquist."""
+    """Margins of one axis, on 4000 log-spaced frequencies from 0.01 Hz to Nyquist.
+
+    At Nyquist a sampled loop is real: when it is negative there (phase −180°, e.g. with a
+    measured velocity) the gain margin is read there too.
+    """
     f = np.geomspace(0.01, 0.999 / (2 * Ts), 4000)
-    return loop_margins(f, open_loop(gains, plant, Ts, f, resonance))
+    m = loop_margins(f, open_loop(gains, plant, Ts, f, resonance))
+    L_ny = complex(open_loop(gains, plant, Ts, np.array([0.5 / Ts]), resonance)[0])
+    if L_ny.real < 0 and abs(L_ny.imag) <= 1e-6 * abs(L_ny):
+        gm = -20.0 * math.log10(abs(L_ny))
+        if gm < m.gain_margin_db:
+            m = Margins(m.phase_margin_deg, m.crossover_hz, gm, 0.5 / Ts)
+    return m
 
 
 def move_profile(distance_mm: float, feed: float, a_max: float, Ts: float, hold_s: float) -> np.ndarray:
@@ -153,7 +167,7 @@ def step_overshoot(gains: Gains, plant: Plant, Ts: float) -> float:
 
         timing = replace(timing, delay=timing.delay + int(round(plant.delay_s / Ts)))
     x, _ = simulate_loop(xr, Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, Kf0=gains.ff0, kj=plant.kj, bj=plant.bj,
-                         timing=timing)
+                         timing=timing, integration=plant.integration)
     if not np.all(np.isfinite(x)) or abs(x[-1] - STEP_MM) > 0.02 * STEP_MM:
         return math.inf
     return max(float(x.max()) - STEP_MM, 0.0) / STEP_MM

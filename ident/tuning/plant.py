@@ -56,6 +56,9 @@ class Plant:
         per unit mass kj·d, mm/s².
     gap_mm : backlash the diagnosis accepted (0: none).
     delay_s : accepted dead time beyond the controller's sampling (0: none).
+    integration : how the drive moves between samples: "continuous" (a real drive) or
+        "euler" (one semi-implicit Euler step per period: the headless LinuxCNC test
+        machine's HAL plant, whose x responds half a period earlier than a continuous one).
     """
 
     kj: float
@@ -64,6 +67,7 @@ class Plant:
     d_minus: float
     gap_mm: float = 0.0
     delay_s: float = 0.0
+    integration: str = "continuous"
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -101,7 +105,7 @@ def excitation(axis: str, Ts: float) -> tuple[np.ndarray, np.ndarray]:
     return run.commanded[axis], run.segment
 
 
-def derive_plant(model: AxisModel, gains: Gains, axis: str = "X") -> Plant:
+def derive_plant(model: AxisModel, gains: Gains, axis: str = "X", integration: str = "continuous") -> Plant:
     """The plant of one axis (module docstring): coefficient matching, then response matching."""
     start = match_coefficients(model, gains)
     Ts = model.sample_period
@@ -131,7 +135,8 @@ def derive_plant(model: AxisModel, gains: Gains, axis: str = "X") -> Plant:
         out = []
         for a, b in zip(bounds[:-1], bounds[1:]):
             x, _ = simulate_loop(x_r[a:b], Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, Kf0=gains.ff0, kj=kj, bj=bj,
-                                 d_plus=dp, d_minus=dm, u_max=gains.u_max, timing=timing)
+                                 d_plus=dp, d_minus=dm, u_max=gains.u_max, timing=timing,
+                                 integration=integration)
             out.append(x)
         return np.concatenate(out)
 
@@ -147,4 +152,4 @@ def derive_plant(model: AxisModel, gains: Gains, axis: str = "X") -> Plant:
     n = 2 if fixed else 4
     z = bounded_lm(resid, z0[:n], lb[:n], ub[:n], max_iter=40).z
     dp, dm = (start.d_plus, start.d_minus) if fixed else (float(z[2]), float(z[3]))
-    return Plant(math.exp(z[0]), float(z[1]), dp, dm, start.gap_mm, start.delay_s)
+    return Plant(math.exp(z[0]), float(z[1]), dp, dm, start.gap_mm, start.delay_s, integration)

@@ -81,7 +81,7 @@ def _lag_ms(gains: Gains, plant: Plant, Ts: float, f_hz: float) -> float:
     xr = np.sin(2 * math.pi * f_hz * t)
     run = CommandedRun(t=t, commanded={"A": xr}, segment=np.zeros(n, np.int64), line=np.zeros(n, np.int64),
                        Ts=Ts, programs=({"name": "sine", "sha256": ""},), blocks=({},))
-    lin = Plant(plant.kj, plant.bj, 0.0, 0.0, plant.gap_mm, plant.delay_s)
+    lin = Plant(plant.kj, plant.bj, 0.0, 0.0, plant.gap_mm, plant.delay_s, plant.integration)
     x = follow(run, {"A": gains}, {"A": lin}, ["A"])[0]["A"]
     k = t >= 1.0 / f_hz  # one period to settle
     c = np.column_stack([np.sin(2 * math.pi * f_hz * t[k]), np.cos(2 * math.pi * f_hz * t[k])])
@@ -90,8 +90,11 @@ def _lag_ms(gains: Gains, plant: Plant, Ts: float, f_hz: float) -> float:
 
 
 def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
-         proposed: Mapping[str, Gains] | None = None) -> Tuning:
+         proposed: Mapping[str, Gains] | None = None, integration: str = "continuous") -> Tuning:
     """Propose (or check ``proposed``) gains for the axes of ``test`` on ``vm`` (module docstring).
+
+    ``integration``: how the drives move between samples (:class:`ident.tuning.plant.Plant`);
+    "euler" only for the headless LinuxCNC test machine.
 
     Raises TuningRefused (one line) when the proposal violates a margin or nothing keeps them.
     """
@@ -100,7 +103,7 @@ def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
     missing = [a for a in axes if a not in gains]
     if missing:
         raise InputError.about("controller", f"no controller gains for axis {missing[0]}")
-    plants = {a: derive_plant(vm.axes[a], gains[a], a) for a in axes}
+    plants = {a: derive_plant(vm.axes[a], gains[a], a, integration) for a in axes}
     res = {a: _resonance(vm, a) for a in axes}
     before = {a: gains[a] for a in axes}
     m_before = {a: violations(before[a], plants[a], Ts, res[a])[:2] for a in axes}
