@@ -13,7 +13,7 @@ is found in two steps (docs/tuning.md derives both):
    residuals; an identified coefficient that is ~0 is weighted by the size of its row),
    and d⁺ = d0/kj, d⁻ = d1/kj.
 2. **Response matching.**  The continuous-time equations ignore the servo's sampling
-   (ZOH, differences, a period of computation delay), which the identification absorbs
+   (ZOH, differences of the command and of the feedback), which the identification absorbs
    into a preview shift and coefficients biased by tens of percent (docs/linuxcnc.md:
    +9 %; the P-PI presets more, thesis Table 3.3).  So (kj, bj, d⁺, d⁻) are refined by
    bounded Levenberg–Marquardt until the controller's *sampled* loop
