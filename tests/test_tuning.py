@@ -232,3 +232,23 @@ def test_cli_prints_the_ini_lines_to_change_with_backlash_from_the_gap(tmp_path)
     after = out["margins"]["X"]["after"]
     assert after["phase_margin_deg"] >= 45 and (after["gain_margin_db"] or math.inf) >= 6
     assert after["step_overshoot"] <= 0.001
+
+
+def test_a_part_program_is_judged_by_its_contour_error(identified):
+    """--program: the figure is the max contour error of the two-axis program; the tuned
+    machine's is smaller and within 10 % of the virtual CNC's measured one."""
+    from gcode_gen.toolpaths import diamond
+    from ident.prediction import _feed_moves, contour_of_run
+
+    machine, vm = PRESETS["fadal-pid"], identified["fadal-pid"]
+    part = diamond(size=20.0, feed=100.0)
+    crit = Criterion.program(vm, [part])
+    result = tune(vm, _gains(machine, "pid"), crit)
+    assert result.test == "contour_error_max_um"
+    assert result.predicted_after < 0.7 * result.predicted_before
+    rec = virtual_cnc.simulate([part], _tuned_machine(machine, result.after), seed=4)
+    run = crit.runs[0]
+    assert all(np.allclose(rec.axes[a].commanded, run.commanded[a]) for a in ("X", "Y"))
+    err = contour_of_run(run, {a: rec.axes[a].commanded for a in "XY"}, {a: rec.axes[a].actual for a in "XY"})
+    measured = 1e3 * np.max(np.abs(err[_feed_moves(run)]))
+    assert measured == pytest.approx(result.predicted_after, rel=0.10)
