@@ -43,10 +43,13 @@ GAIN_NAMES = {
 #: difference; LinuxCNC's pid differentiates the command backwards and reads the drive's
 #: velocity (feedback-deriv).  Both hold u over the next period (the servo thread runs the
 #: plant before pid, so pid's output of period k drives period k+1: a ZOH, no more delay).
+#: LinuxCNC's pid takes its position error against the previous period's command
+#: (error-previous-target) and its derivatives from the current one: with the true plant
+#: this loop reproduces a capture of fixtures/linuxcnc to 0.000 µm rms (60 µm without).
 TIMINGS = {
     "p-pi": Timing(central_reference=True, measured_velocity=False, delay=0),
     "pid": Timing(central_reference=True, measured_velocity=False, delay=0),
-    "linuxcnc-pid": Timing(central_reference=False, measured_velocity=True, delay=0),
+    "linuxcnc-pid": Timing(central_reference=False, measured_velocity=True, delay=0, previous_target=True),
 }
 
 

@@ -41,16 +41,20 @@ class Timing:
     measured_velocity : the feedback velocity is the drive's own (an encoder's velocity
         output, LinuxCNC's feedback-deriv) rather than the backward difference of position.
     delay : whole periods between computing u and applying it.
+    previous_target : the position error is taken against the previous period's command
+        (e = x_r(k−1) − x(k)) while the derivatives use the current one: LinuxCNC pid's
+        ``error-previous-target``, on in the headless test machine (docs/tuning.md).
     """
 
     central_reference: bool = True
     measured_velocity: bool = False
     delay: int = 0
+    previous_target: bool = False
 
 
 @njit(cache=True)
 def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, Kf0, u_max, kj, bj, dp, dm, central, meas_vel, delay,
-          euler, out_x, out_u):
+          prev_target, euler, out_x, out_u):
     n = xr.shape[0]
     h = Ts / nsub
     x = xr[0]
@@ -73,7 +77,10 @@ def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, Kf0, u_max, kj, bj, dp, dm, cen
         else:
             xrd = 0.0
             xrdd = 0.0
-        e = xr[k] - x
+        if prev_target and k > 0:
+            e = xr[k - 1] - x
+        else:
+            e = xr[k] - x
         if ppi:
             ev = Kp * (e + Kv * xrd + Ka * xrdd) - vel
             w = ev
@@ -161,5 +168,5 @@ def simulate_loop(x_r: np.ndarray, Ts: float, *, kind: str, Kp: float, Ki: float
     _loop(xr, float(Ts), int(substeps), kind == "ppi", float(Kp), float(Ki), float(Kd), float(Kv), float(Ka),
           float(Kf0), float(u_max) if np.isfinite(u_max) else 1e300, float(kj), float(bj), float(d_plus), float(d_minus),
           bool(timing.central_reference), bool(timing.measured_velocity), int(timing.delay),
-          integration == "euler", x, u)
+          bool(timing.previous_target), integration == "euler", x, u)
     return x, u
