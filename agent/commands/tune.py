@@ -57,7 +57,8 @@ def tune(
                    f"gain {mb.gain_margin_db:.1f} → {ma.gain_margin_db:.1f} dB; lag at the test feed "
                    f"{result.lag_ms[a] * 1e3:.2f} µs")
         b, n = result.before[a].to_dict(), result.after[a].to_dict()
-        typer.echo(f"  {a} gains: " + ", ".join(f"{k} {b[k]:.6g} → {n[k]:.6g}" for k in n if n[k] != b[k]))
+        changed = [f"{k} {b[k]:.6g} → {n[k]:.6g}" for k in n if n[k] != b[k]]
+        typer.echo(f"  {a} gains: " + (", ".join(changed) if changed else "unchanged"))
     for note in result.notes:
         typer.echo(f"  note: {note}")
     for line in diff:

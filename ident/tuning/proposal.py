@@ -107,8 +107,9 @@ def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
     res = {a: _resonance(vm, a) for a in axes}
     before = {a: gains[a] for a in axes}
     m_before = {a: violations(before[a], plants[a], Ts, res[a])[:2] for a in axes}
-    fig_before, _ = predicted_figure(test, before, plants)
+    fig_before, u_before = predicted_figure(test, before, plants)
     design = None
+    notes: list[str] = []
     if proposed is not None:
         after = {a: proposed.get(a, before[a]) for a in axes}
         for a in axes:
@@ -124,7 +125,12 @@ def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
             raise TuningRefused("no gains keep phase margin ≥ 45°, gain margin ≥ 6 dB, no overshoot and the "
                                 "output limit on every axis; nothing proposed")
         design, after, fig_after = found
-    notes = []
+        # the current gains stay when they keep every margin and no design does better
+        if fig_before <= fig_after and u_before <= 1.0 and not any(
+                violations(before[a], plants[a], Ts, res[a])[2] for a in axes):
+            design, after, fig_after = None, dict(before), fig_before
+            notes.append("the current gains keep every margin and no design in the search predicts better: "
+                         "keep them")
     for a in axes:
         if plants[a].gap_mm > 0:
             if after[a].form == "linuxcnc-pid":
