@@ -71,6 +71,18 @@ def _f(v: float) -> float | None:
     return float(v) if math.isfinite(v) else None
 
 
+#: Axes whose lags at the test feed differ by at most this are matched (ms): 1 µm of
+#: servo-mismatch ellipse at 1000 mm/min (½·v·Δτ).
+MATCHED_LAG_MS = 0.12
+
+
+def _test_hz(test: Criterion) -> float:
+    """The frequency the lags are compared at: the ballbar's circle, or the default ballbar's (R 100, 1000 mm/min)."""
+    if test.kind == "ballbar":
+        return test.feed / (2 * math.pi * test.radius)
+    return 1000.0 / 60.0 / (2 * math.pi * 100.0)
+
+
 def _lag_ms(gains: Gains, plant: Plant, Ts: float, f_hz: float) -> float:
     """Lag behind the command of a sine at ``f_hz``, ms, measured on the sampled loop (linear, no friction)."""
     from ident.tuning.figures import follow
@@ -125,8 +137,10 @@ def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
             raise TuningRefused("no gains keep phase margin ≥ 45°, gain margin ≥ 6 dB, no overshoot and the "
                                 "output limit on every axis; nothing proposed")
         design, after, fig_after = found
-        # the current gains stay when they keep every margin and no design does better
-        if fig_before <= fig_after and u_before <= 1.0 and not any(
+        # the current gains stay when they keep every margin, the axes are matched (equal
+        # lag at the test feed within MATCHED_LAG_MS) and no design does better
+        lags = [_lag_ms(before[a], plants[a], Ts, _test_hz(test)) for a in axes]
+        if fig_before <= fig_after and u_before <= 1.0 and max(lags) - min(lags) <= MATCHED_LAG_MS and not any(
                 violations(before[a], plants[a], Ts, res[a])[2] for a in axes):
             design, after, fig_after = None, dict(before), fig_before
             notes.append("the current gains keep every margin and no design in the search predicts better: "
@@ -141,8 +155,7 @@ def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
                 notes.append(f"axis {a}: backlash {plants[a].gap_mm * 1e3:.1f} µm accepted; compensate it in the "
                              f"controller's lost-motion setting")
     m_after = {a: violations(after[a], plants[a], Ts, res[a])[:2] for a in axes}
-    f_test = test.feed / (2 * math.pi * test.radius) if test.kind == "ballbar" else 1000 / 60 / (2 * math.pi * 100)
-    lag = {a: _lag_ms(after[a], plants[a], Ts, f_test) for a in axes}
+    lag = {a: _lag_ms(after[a], plants[a], Ts, _test_hz(test)) for a in axes}
     return Tuning(test.unit, plants, before, after, m_before, m_after, fig_before, fig_after, lag, design,
                   tuple(notes))
 
