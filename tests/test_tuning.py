@@ -252,3 +252,13 @@ def test_a_part_program_is_judged_by_its_contour_error(identified):
     err = contour_of_run(run, {a: rec.axes[a].commanded for a in "XY"}, {a: rec.axes[a].actual for a in "XY"})
     measured = 1e3 * np.max(np.abs(err[_feed_moves(run)]))
     assert measured == pytest.approx(result.predicted_after, rel=0.10)
+
+
+def test_the_proposal_is_deterministic(identified):
+    """Fixed grids, a fixed excitation, no clock: the same inputs give the same JSON."""
+    from gcode_gen.toolpaths import diamond
+
+    vm, gains = identified["fadal-pid"], _gains(PRESETS["fadal-pid"], "pid")
+    docs = [json.dumps(tune(vm, gains, Criterion.program(vm, [diamond(size=20.0, feed=100.0)])).to_dict(),
+                       sort_keys=True) for _ in range(2)]
+    assert docs[0] == docs[1]

@@ -10,13 +10,14 @@ and the gains solve eq. 3.5 (PID: Kd = (a1 − bj)/kj, Kp = a2/kj, Ki = a3/kj) o
 (P-PI: Kd = (a1 − bj)/kj, Kp the smaller root of Kd·Kp² − (a2/kj)·Kp + a3/kj = 0,
 Ki = a3/(kj·Kp)).  The feed-forwards are a fraction φ of the plant inverse (PID:
 Kv = φ·bj/kj, Ka = φ/kj, so b0 = φ and b1 = kj·Kd + φ·bj: G_track = 1 at φ = 1; P-PI:
-Kv = φ/Kp, Ka = φ/(kj·Kp·Kd), so b0 = φ and b2 = a2 − (1 − φ)·kj·Kp·Kd... the P-PI
-structure cannot also match b1 = a1, which the sampled prediction accounts for).
+Kv = φ/Kp, Ka = φ/(kj·Kp·Kd), so b0 = φ and b2 = a2 − (1 − φ)·kj·Ki; the P-PI structure
+cannot also make b1 = a1, which the sampled prediction accounts for).  For LinuxCNC's pid
+a lead λ (:data:`LEADS`) may be conceded: FF1 −= P·λ, FF2 −= D·λ, FF0 = −I·λ (docs/tuning.md).
 
 The search: ω over :data:`OMEGA_HZ`, ζ over :data:`ZETAS`, r over :data:`RATIOS` (fixed
 grids, no random start, no clock); a feedback design is admissible when every axis keeps
 the phase and gain margins (:mod:`ident.tuning.margins`); each admissible design is tried
-with every φ of :data:`FF_FRACTIONS`, kept when no axis overshoots a 1 mm move, and scored;
+with every φ of :data:`FF_FRACTIONS` (and λ), kept when no axis overshoots a 1 mm move, and scored;
 the proposal is the lowest predicted figure whose run keeps the output within its limit.
 """
 
@@ -33,7 +34,7 @@ from ident.tuning.margins import GAIN_MARGIN_DB, OVERSHOOT_LIMIT, PHASE_MARGIN_D
 from ident.tuning.plant import Plant
 
 __all__ = ["Design", "design_gains", "admissible", "search", "OMEGA_HZ", "ZETAS", "RATIOS", "FF_FRACTIONS",
-           "violations"]
+           "LEADS", "violations"]
 
 OMEGA_HZ = tuple(float(v) for v in np.geomspace(5.0, 60.0, 8))
 ZETAS = (0.8, 1.0)
