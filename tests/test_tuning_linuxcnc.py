@@ -77,7 +77,7 @@ def test_tuning_proven_on_linuxcnc(tmp_path):
         after = _max_tracking_error_um(tmp_path / "after.mcap")
     finally:
         lx.stop_machine()  # the gains were changed at run time: never leave this machine for others
-    pb, pa = doc["predicted_before"]["contour_error_max_um"], doc["predicted_after"]["contour_error_max_um"]
+    pb, pa = doc["predicted_before"]["tracking_error_max_um"], doc["predicted_after"]["tracking_error_max_um"]
     print(f"max tracking error: predicted {pb:.1f} -> {pa:.1f} µm, measured {before:.1f} -> {after:.1f} µm")
     assert after == pytest.approx(pa, rel=0.10)
     assert before == pytest.approx(pb, rel=0.10)

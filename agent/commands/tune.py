@@ -44,7 +44,8 @@ def tune(
     result, diff = tune_files(machine, controller=controller, ini=ini, gains=gain, propose=propose, programs=program,
                               ballbar=ballbar, radius=radius, feed=feed, axes=plane, u_max=u_max, json_out=json_out,
                               integration=plant_integration)
-    what = "circularity" if result.test == "circularity_um" else "max contour error"
+    what = {"circularity_um": "circularity", "contour_error_max_um": "max contour error",
+            "tracking_error_max_um": "max tracking error"}[result.test]
     change = 100.0 * (result.predicted_after / result.predicted_before - 1.0) if result.predicted_before else 0.0
     typer.echo(f"predicted {what}: before {result.predicted_before:.2f} µm, after {result.predicted_after:.2f} µm "
                f"({change:+.0f} %)")

@@ -56,7 +56,10 @@ class Criterion:
 
     @property
     def unit(self) -> str:
-        return "circularity_um" if self.kind == "ballbar" else "contour_error_max_um"
+        """The figure's name in the JSON: circularity, max contour error, or max tracking error (one axis)."""
+        if self.kind == "ballbar":
+            return "circularity_um"
+        return "contour_error_max_um" if len(self.axes) >= 2 else "tracking_error_max_um"
 
 
 def follow(run: CommandedRun, gains: Mapping[str, Gains], plants: Mapping[str, Plant],
