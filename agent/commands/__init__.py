@@ -14,6 +14,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "identify": ("agent.commands.identify", "identify"),
     "predict": ("agent.commands.predict", "predict"),
     "ballbar": ("agent.commands.ballbar", "ballbar"),
+    "tune": ("agent.commands.tune", "tune"),
 }
 
 

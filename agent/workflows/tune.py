@@ -1,0 +1,102 @@
+"""``agent tune`` as a workflow of files: result JSON + INI or gains → proposal, INI diff, JSON.
+
+Never writes to a controller: the INI is read, and the lines to change are printed as a
+unified diff the user applies.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Sequence
+
+from agent.outputs import write_json
+from core.errors import InputError
+from ident.tuning import Gains, Criterion, Tuning, tune
+from ident.tuning.controllers import GAIN_NAMES
+from ident.virtual_machine import load_virtual_machine
+
+__all__ = ["tune_files", "parse_gains"]
+
+
+def parse_gains(form: str, axes: Sequence[str], assignments: Sequence[str], flag: str) -> dict[str, dict[str, float]]:
+    """``[AXIS.]NAME=VALUE`` assignments → {axis: {name: value}} (no axis: every axis)."""
+    out: dict[str, dict[str, float]] = {a: {} for a in axes}
+    for text in assignments:
+        lhs, eq, rhs = text.partition("=")
+        if not eq:
+            raise InputError(f"{flag} {text!r}: expected [AXIS.]NAME=VALUE, e.g. X.Kp=30")
+        axis, dot, name = lhs.strip().rpartition(".")
+        targets = [axis] if dot else list(axes)
+        if dot and axis not in out:
+            raise InputError(f"{flag} {text!r}: no axis {axis} (axes: {', '.join(axes)})")
+        if name not in GAIN_NAMES[form]:
+            raise InputError(f"{flag} {text!r}: {form} has no gain {name!r} ({', '.join(GAIN_NAMES[form])})")
+        try:
+            value = float(rhs)
+        except ValueError:
+            raise InputError(f"{flag} {text!r}: {rhs.strip()!r} is not a number") from None
+        for a in targets:
+            out[a][name] = value
+    return out
+
+
+def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Sequence[str], propose: Sequence[str],
+               programs: Sequence[Path], ballbar: bool, radius: float, feed: float, axes: Sequence[str] | None,
+               u_max: float, json_out: Path | None,
+               integration: str = "continuous") -> tuple[Tuning, list[str]]:
+    """Run the tuning; returns it and the INI diff lines (empty without an INI)."""
+    vm = load_virtual_machine(machine)
+    if bool(programs) == bool(ballbar):
+        raise InputError("give --program FILE or --ballbar (one of the two): what the tuning is judged on")
+    if ballbar:
+        plane = tuple(axes) if axes else tuple(a for a in ("X", "Y") if a in vm.axes)
+        if len(plane) != 2:
+            raise InputError.about("axes", f"the ballbar needs two axes; {vm.name} has {', '.join(vm.axes)}")
+        test = Criterion.ballbar(vm, plane, radius, feed)
+    else:
+        test = Criterion.program(vm, programs)
+    joints: dict[str, int] = {}
+    if controller == "linuxcnc-pid":
+        if ini is None:
+            raise InputError.about("ini", "--controller linuxcnc-pid reads the gains from the machine's INI: give --ini")
+        from ident.tuning.ini import read_joint_gains
+
+        read = read_joint_gains(ini, list(test.axes))
+        current = {a: g for a, (_, g) in read.items()}
+        joints = {a: j for a, (j, _) in read.items()}
+        extra = parse_gains(controller, test.axes, gains, "--gain")
+        current = {a: Gains(controller, {**g.values, **extra[a]}, g.u_max) for a, g in current.items()}
+    else:
+        if ini is not None:
+            raise InputError.about("ini", f"--ini holds LinuxCNC pid gains; --controller {controller} takes --gain")
+        given = parse_gains(controller, test.axes, gains, "--gain")
+        for a, v in given.items():
+            need = [k for k in GAIN_NAMES[controller][:3] if k not in v]
+            if need:
+                raise InputError.about("gain", f"axis {a}: no {need[0]} (give --gain {a}.{need[0]}=… or "
+                                               f"--gain {need[0]}=… for every axis)")
+        current = {a: Gains(controller, v, u_max) for a, v in given.items()}
+    proposed = None
+    if propose:
+        changes = parse_gains(controller, test.axes, propose, "--propose")
+        proposed = {a: Gains(controller, {**current[a].values, **changes[a]}, current[a].u_max) for a in test.axes}
+    result = tune(vm, current, test, proposed, integration)
+    diff: list[str] = []
+    if ini is not None:
+        from ident.tuning.ini import ini_diff
+
+        changes = {}
+        for a, j in joints.items():
+            b, n = result.before[a].values, result.after[a].values
+            ch = {k: n[k] for k in GAIN_NAMES[controller] if abs(n[k] - b[k]) > 1e-12 * max(1.0, abs(b[k]))}
+            if ch:
+                changes[j] = ch
+        diff = ini_diff(ini, changes)
+    if json_out is not None:
+        doc = result.to_dict()
+        doc["machine"] = vm.name
+        doc["controller"] = controller
+        doc["ini_diff"] = diff
+        write_json(json.dumps(doc, indent=2, allow_nan=False), json_out)
+    return result, diff
