@@ -219,8 +219,10 @@ def test_model_scores_the_old_model_as_it_was_identified(tmp_path, work, result)
     assert agent("simulate", work / "prog/ident_low.nc", work / "prog/ident_high.nc", "--seed", 7, "-o",
                  new).returncode == 0
     out = tmp_path / "scored.json"
-    proc = agent("identify", new, "--model", result, "--no-diagnose", "--json", out)
+    report = tmp_path / "scored.html"
+    proc = agent("identify", new, "--model", result, "--no-diagnose", "--json", out, "--report", report)
     assert proc.returncode == 0, proc.stderr
+    assert f"the model of {result.name} as it was identified, scored on this recording" in report.read_text()
     old = json.loads(result.read_text())["axes"]["X"]
     assert f"the model of {result.name} as it was identified (preview shift {old['preview_shift_samples']} " \
            in proc.stdout
