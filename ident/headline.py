@@ -191,11 +191,13 @@ def _action(r: AxisResult, accepted: dict, fig: float | None) -> str:
 
 def _shift_words(r: AxisResult) -> str:
     ms = abs(r.shift) * r.sample_period * 1e3
+    n = abs(r.shift)
+    samples = "sample" if n == 1 else "samples"
     if r.shift < 0:
-        return (f"a dead time of {ms:.3g} ms (preview shift {r.shift} samples: the axis responds as if each command "
-                f"arrived {abs(r.shift)} samples later than recorded — a delay in the drive or the capture)")
-    return (f"a preview of {ms:.3g} ms (preview shift +{r.shift} samples: the drive acts on each command "
-            f"{r.shift} samples before it is recorded, as a feed-forward with look-ahead does)")
+        return (f"a dead time of {ms:.3g} ms (preview shift {r.shift} {samples}: the axis responds as if each command "
+                f"arrived {n} {samples} later than recorded — a delay in the drive or the capture)")
+    return (f"a preview of {ms:.3g} ms (preview shift +{r.shift} {samples}: the drive acts on each command "
+            f"{n} {samples} before it is recorded, as a feed-forward with look-ahead does)")
 
 
 def term_notes(r: AxisResult) -> list[str]:
