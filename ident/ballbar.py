@@ -442,7 +442,9 @@ def words(result: BallbarResult) -> list[str]:
             out.append(f"reversal spikes on {where}: {a.spike_um:.1f} µm "
                        f"(friction or a servo lag at the {a.axis} reversals)")
         if abs(a.step_um) >= t:
-            out.append(f"backlash step on {where}: {a.step_um:+.1f} µm (lost motion of {a.axis})")
+            # a plot alone cannot tell a gap from friction holding the axis back after a reversal
+            out.append(f"reversal step on {where}: {a.step_um:+.1f} µm (lost motion of {a.axis}: backlash, or "
+                       f"friction holding it back)")
     spec = np.asarray(result.cyclic_spectrum_um)
     amp = result.cyclic_amplitude_um
     if amp >= t and amp >= CYCLIC_PROMINENCE * np.median(spec):

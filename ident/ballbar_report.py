@@ -35,30 +35,6 @@ def _figures(tests: Sequence[SyntheticBallbar]) -> str:
                         "scale mismatch", "reversal spike / step (µm)"))
 
 
-def _cause_words(t: SyntheticBallbar) -> list[str]:
-    """The reading of the plot with each reversal step named by its cause in the model.
-
-    A ballbar reads a step at an axis reversal as backlash by convention; the synthetic test
-    knows which term of the model makes it (its ``causes``: the step with friction or
-    backlash removed), so the step is named after the larger one.
-    """
-    out = []
-    for w in t.words():
-        if w.startswith("backlash step on "):
-            axis = w.split()[3]
-            c = t.causes.get(axis, {})
-            full = c.get("model", {}).get("step_um", 0.0)
-            parts = {term: full - c[f"without_{term}"]["step_um"] for term in ("friction", "backlash")
-                     if f"without_{term}" in c}
-            cause = max(parts, key=lambda k: abs(parts[k])) if parts else None
-            words = {"friction": "friction, not backlash (the model has none)" if "backlash" not in parts
-                     else "friction", "backlash": "backlash"}
-            rest = w[len("backlash step on "):]
-            w = f"reversal step on {rest}" + (f", caused by {words[cause]}" if cause else "")
-        out.append(w)
-    return out
-
-
 def _polar(t: SyntheticBallbar) -> str:
     fig = plot_ballbar(t.result, t.measured)
     ax = fig.axes[0]
@@ -80,7 +56,7 @@ def render_ballbar_report(tests: Sequence[SyntheticBallbar]) -> str:
              "<h2>Figures</h2>", _figures(tests)]
     for t in tests:
         parts.append(f"<h2>{html.escape(t.machine)}</h2>")
-        parts.append("<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in _cause_words(t)) + "</ul>")
+        parts.append("<ul>" + "".join(f"<li>{html.escape(w)}</li>" for w in t.words()) + "</ul>")
         parts.append(_polar(t))
     return page("rapid-ident ballbar", parts)
 

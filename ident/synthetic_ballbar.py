@@ -77,7 +77,9 @@ class SyntheticBallbar:
     planner: dict[str, Any] = field(default_factory=dict)
 
     def words(self) -> list[str]:
-        out = words(self.result)
+        """The plot read as a QC20 user reads it, each reversal step named by its cause in the
+        model (the step with friction or backlash removed, :attr:`causes`), then the causes."""
+        out = [self._step_cause(w) for w in words(self.result)]
         out.append(f"servo mismatch from the axes' transfer functions at {self.feed / self.radius / (2 * math.pi):.3g} Hz: "
                    f"{self.model_servo_mismatch_ms:+.2f} ms (the plot reads {self.result.servo_mismatch_ms:+.2f} ms)")
         t = self.result.threshold_um
@@ -93,6 +95,21 @@ class SyntheticBallbar:
             out.append(f"{axis} reversals ({full['spike_um']:.1f} µm spike, {full['step_um']:+.1f} µm step) "
                        f"caused by: " + "; ".join(parts))
         return out
+
+    def _step_cause(self, w: str) -> str:
+        if not w.startswith("reversal step on "):
+            return w
+        axis = w.split()[3]
+        c = self.causes.get(axis, {})
+        full = c.get("model", {}).get("step_um", 0.0)
+        parts = {term: full - c[f"without_{term}"]["step_um"] for term in ("friction", "backlash")
+                 if f"without_{term}" in c}
+        if not parts:
+            return w
+        cause = max(parts, key=lambda k: abs(parts[k]))
+        named = {"friction": "friction" if "backlash" in parts else "friction, not backlash (the model has none)",
+                 "backlash": "backlash"}[cause]
+        return w[:w.index(" (lost motion")] + f", caused by {named}"
 
     def to_dict(self) -> dict[str, Any]:
         return {"machine": self.machine, "radius_mm": self.radius, "feed_mm_s": self.feed,

@@ -137,7 +137,7 @@ def test_lost_motion_is_a_step_and_does_not_read_as_servo_mismatch():
     assert x.step_um == pytest.approx(8.0, rel=0.05) and abs(y.step_um) < 0.3
     assert x.spike_um < 1.0 and y.spike_um < 1.0
     assert abs(res.servo_mismatch_ms) < 0.02 and abs(res.squareness_um) < 0.2
-    assert any(s.startswith("backlash step on X at 0° and 180°: +8") for s in words(res))
+    assert any(s.startswith("reversal step on X at 0° and 180°: +8") for s in words(res))
 
 
 def test_cyclic_error_order_and_amplitude():
