@@ -119,11 +119,17 @@ def test_ini_gains_and_diff_lines_exact(tmp_path):
     (j, g), = read_joint_gains(ini, ["X"]).values()
     assert j == 0 and g.values["P"] == 10.0 and g.values["D"] == 0.14 and math.isinf(g.u_max)
     diff = ini_diff(ini, {0: {"P": 42.5, "FF2": 0.001, "BACKLASH": 0.02}})
+    # the fixture's [JOINT_0] lines (1-based): each changed key in place, a new key after the section's last key
+    lines = ini.read_text().splitlines()
+    start = lines.index("[JOINT_0]")
+    end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))
+    at = {ln.split("=")[0].strip(): i + 1 for i, ln in enumerate(lines[start:end], start) if "=" in ln}
+    last = max(at.values())
     assert diff == [
         "--- a/machine.ini", "+++ b/machine.ini",
-        "@@ -104 +104 @@", "-P = 10.0", "+P = 42.5",
-        "@@ -109 +109 @@", "-FF2 = 0.0", "+FF2 = 0.001",
-        "@@ -112,0 +113 @@", "+BACKLASH = 0.02",
+        f"@@ -{at['P']} +{at['P']} @@", "-P = 10.0", "+P = 42.5",
+        f"@@ -{at['FF2']} +{at['FF2']} @@", "-FF2 = 0.0", "+FF2 = 0.001",
+        f"@@ -{last},0 +{last + 1} @@", "+BACKLASH = 0.02",
     ]
 
 

@@ -30,12 +30,12 @@ def tune(
 
     Never writes to a controller.  Example: agent tune --machine result.json --ballbar --ini machine.ini
     """
-    from agent.outputs import check_suffix
+    from agent.outputs import check_output
     from agent.workflows.tune import tune_files
     from core.errors import InputError
     from ident.tuning import CONTROLLER_FORMS
 
-    check_suffix(json_out, "--json", ".json")
+    check_output(json_out, "--json", ".json")
     if controller not in CONTROLLER_FORMS:
         raise InputError(f"--controller {controller!r}: one of {', '.join(CONTROLLER_FORMS)}")
     if plant_integration not in ("continuous", "euler"):
