@@ -50,6 +50,38 @@ def test_the_two_axis_machine_has_a_plant_and_a_loop_per_joint_and_effects_per_a
         lx.lm.write_ini(lx.lm.HERE / "machine.ini", tmp_path / "m.ini", {"z.gap_mm": 0.02}, tmp_path / "d.py", "XY")
 
 
+def test_the_three_axis_machine_adds_z_with_x_plant_and_gains(tmp_path):
+    lx.lm.write_ini(lx.lm.HERE / "machine.ini", tmp_path / "machine.ini", {}, tmp_path / "display.py", "XYZ")
+    cp = configparser.ConfigParser(strict=False, interpolation=None)
+    cp.optionxform = str
+    cp.read(tmp_path / "machine.ini")
+    assert cp["KINS"]["JOINTS"] == "3" and cp["TRAJ"]["COORDINATES"] == "X Y Z"
+    assert dict(cp["PLANT_HAL_Z"]) == dict(cp["PLANT_HAL_X"])
+    assert all(cp["JOINT_2"][k] == cp["JOINT_0"][k] for k in ("P", "I", "D", "FF1", "FF2"))
+    hal = lx.lm.expand_hal((lx.lm.HERE / "machine.hal").read_text(), "XYZ")
+    assert "loadrt pid names=pid.x,pid.y,pid.z" in hal
+    assert "net z-pos-cmd joint.2.motor-pos-cmd => pid.z.command" in hal
+    with pytest.raises(SystemExit, match="axes must be one of X, XY, XYZ"):
+        lx.lm.Machine(axes="XZ")
+
+
+def test_a_machine_starts_from_a_copy_of_its_run_ini_with_other_gains(tmp_path):
+    """machine.py start --ini: a run directory's INI (say with tuned [JOINT_n] lines) is derived
+    afresh, not twice."""
+    first = tmp_path / "first.ini"
+    lx.lm.write_ini(lx.lm.HERE / "machine.ini", first, {"y.gap_mm": 0.02}, tmp_path / "display.py", "XY")
+    edited = tmp_path / "edited.ini"
+    edited.write_text(first.read_text().replace("P = 7.0", "P = 70.0", 1))
+    lx.lm.write_ini(edited, tmp_path / "second.ini", {}, tmp_path / "display.py", "XY")
+    text = (tmp_path / "second.ini").read_text()
+    assert text.splitlines().count("[PLANT_HAL_Y]") == 1 and text.count(lx.lm.DERIVED) == 2
+    cp = configparser.ConfigParser(strict=False, interpolation=None)
+    cp.optionxform = str
+    cp.read_string(text)
+    assert cp["JOINT_1"]["P"] == "70.0"
+    assert float(cp["PLANT_HAL_Y"]["GAP_MM"]) == 0.0  # overrides belong to a start, not to the file
+
+
 # -- on LinuxCNC ---------------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")
