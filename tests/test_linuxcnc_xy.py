@@ -11,6 +11,7 @@ from __future__ import annotations
 import configparser
 import json
 import subprocess
+from pathlib import Path
 
 import pytest
 
@@ -139,3 +140,32 @@ def test_the_ballbar_test_reads_on_linuxcnc_as_predicted(identified):
     for got, want in zip(t["predicted"]["runs"], t["measured"]["runs"]):
         assert got["direction"] == want["direction"]
         assert got["circularity_um"] == pytest.approx(want["circularity_um"], rel=0.05)
+
+
+SAMPLE = "/usr/share/linuxcnc/ncfiles/gmoccapy_2_tools_with_cutter_radius_compensation.ngc"
+
+
+@pytest.mark.slow
+def test_a_linuxcnc_sample_program_is_predicted_as_the_three_axis_machine_runs_it(tmp_path):
+    """LinuxCNC's own gmoccapy sample, as shipped (tool changes, G43, G41, helical arcs, Z), on
+    the X, Y, Z machine identified from its own capture: max contour error within 5 %, rms of the
+    difference <= 10 % of the measured rms, cycle time within 1 %."""
+    lx.require_linuxcnc()
+    if not Path(SAMPLE).is_file():
+        pytest.skip(f"{SAMPLE} is missing (LinuxCNC's sample programs)")
+    m = lx.machine(axes="XYZ")
+    port = "linuxcnc://?joints=0,1,2&axes=X,Y,Z"
+    progs = lx.generate(tmp_path, seed=1, n_low=120, n_high=20, axes="XYZ")
+    assert lx.capture_run(m, progs, tmp_path / "ident.mcap", port=port).returncode == 0
+    _agent("identify", tmp_path / "ident.mcap", "--no-diagnose", "--json", tmp_path / "result.json")
+    assert lx.capture_run(m, [Path(SAMPLE)], tmp_path / "sample.mcap", port=port).returncode == 0
+    _agent("predict", SAMPLE, "--machine", tmp_path / "result.json", "--ini", m.run_dir / "machine.ini",
+           "--tool-table", m.run_dir / "tool.tbl", "--against", tmp_path / "sample.mcap", "--json", tmp_path / "p.json")
+    c = json.loads((tmp_path / "p.json").read_text())["comparisons"][0]
+    s = c["standalone"]
+    print(f"\nmeasured {c['measured_max_abs_mm'] * 1e3:.2f} µm, predicted {s['predicted_max_abs_mm'] * 1e3:.2f} µm, "
+          f"rms diff {s['rms_difference_ratio']:.3f}, cycle {c['measured_cycle_time_s']:.3f} / "
+          f"{c['predicted_cycle_time_s']:.3f} s")
+    assert abs(s["max_ratio"] - 1) <= 0.05
+    assert s["rms_difference_ratio"] <= 0.10
+    assert c["predicted_cycle_time_s"] == pytest.approx(c["measured_cycle_time_s"], rel=0.01)
