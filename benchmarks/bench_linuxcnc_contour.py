@@ -46,9 +46,11 @@ def agent(*args: object) -> str:
     return res.stdout
 
 
-def capture(m, programs: list[Path], out: Path) -> None:
-    """Capture ``out`` while the machine (switched off and on first) runs ``programs``."""
-    proc = subprocess.Popen(AGENT + ["capture", "--quiet", "--port", PORT, "-o", str(out)], cwd=ROOT,
+def capture(m, programs: list[Path], out: Path, port: str = PORT) -> None:
+    """Capture ``out`` while the machine (switched off and on first) runs ``programs``.
+
+    A following-error trip aborts the program: client.py then fails and so does this."""
+    proc = subprocess.Popen(AGENT + ["capture", "--quiet", "--port", port, "-o", str(out)], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     while not out.exists():
         if proc.poll() is not None:

@@ -34,12 +34,14 @@ import numpy as np
 
 from core.errors import InputError
 from core.recording import Recording
+from gcode_gen.commands import CommandedRun
 from gcode_gen.program import Block, Toolpath
 from ident.axis_model import AxisModel
 from ident.ballbar import BallbarResult, BallbarRun, analyse_ballbar, ballbar_run, words
 from ident.virtual_machine import VirtualMachine
 
 __all__ = ["SyntheticBallbar", "run_ballbar", "ballbar_of_recording", "ballbar_program", "axis_lag_s", "START_DEG",
+           "start_point", "data_arc_lines",
            "DEFAULT_RADIUS_MM", "DEFAULT_FEED_MM_S", "LEAD_DEG", "DWELL_S"]
 
 #: Start (and end) angle of the test circles: between the reversals at 0°, 90°, 180°, 270°.
@@ -161,10 +163,8 @@ def ballbar_program(radius: float = DEFAULT_RADIUS_MM, feed: float = DEFAULT_FEE
 def _runs(machine: VirtualMachine, axes: tuple[str, str], radius: float, feed: float,
           centre: tuple[float, float], lead_deg: float = LEAD_DEG) -> list[BallbarRun]:
     pred = machine.run([ballbar_program(radius, feed, centre, axes, lead_deg)],
-                       start=dict(zip(axes, _start(radius, centre, lead_deg))))
-    blocks = sorted(pred.run.blocks[0].items())
-    arcs = [line for line, b in blocks if b.motion in ("G2", "G3")]
-    data = (arcs[1], arcs[4]) if lead_deg > 0 else (arcs[0], arcs[1])
+                       start=dict(zip(axes, start_point(radius, centre, lead_deg))))
+    data = data_arc_lines(pred.run, lead_deg)
     rec = pred.recording
     x, y = rec.axes[axes[0]], rec.axes[axes[1]]
     runs = []
@@ -175,7 +175,13 @@ def _runs(machine: VirtualMachine, axes: tuple[str, str], radius: float, feed: f
     return runs
 
 
-def _start(radius: float, centre: tuple[float, float], lead_deg: float) -> tuple[float, float]:
+def data_arc_lines(run: CommandedRun, lead_deg: float) -> tuple[int, int]:
+    """The program lines of the ccw and cw data arcs of :func:`ballbar_program` in ``run``."""
+    arcs = [line for line, b in sorted(run.blocks[0].items()) if b.motion in ("G2", "G3")]
+    return (arcs[1], arcs[4]) if lead_deg > 0 else (arcs[0], arcs[1])
+
+
+def start_point(radius: float, centre: tuple[float, float], lead_deg: float) -> tuple[float, float]:
     """Where the test starts: on the feed-in arc's start, so the positioning move costs nothing."""
     phi = math.radians(START_DEG - lead_deg)
     return round(centre[0] + radius * math.cos(phi), 4), round(centre[1] + radius * math.sin(phi), 4)

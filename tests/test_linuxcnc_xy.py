@@ -11,6 +11,7 @@ from __future__ import annotations
 import configparser
 import json
 import subprocess
+from pathlib import Path
 
 import pytest
 
@@ -48,6 +49,38 @@ def test_the_two_axis_machine_has_a_plant_and_a_loop_per_joint_and_effects_per_a
     assert "net y-pos-cmd joint.1.motor-pos-cmd => pid.y.command" in hal
     with pytest.raises(SystemExit, match="no axis 'z'"):
         lx.lm.write_ini(lx.lm.HERE / "machine.ini", tmp_path / "m.ini", {"z.gap_mm": 0.02}, tmp_path / "d.py", "XY")
+
+
+def test_the_three_axis_machine_adds_z_with_x_plant_and_gains(tmp_path):
+    lx.lm.write_ini(lx.lm.HERE / "machine.ini", tmp_path / "machine.ini", {}, tmp_path / "display.py", "XYZ")
+    cp = configparser.ConfigParser(strict=False, interpolation=None)
+    cp.optionxform = str
+    cp.read(tmp_path / "machine.ini")
+    assert cp["KINS"]["JOINTS"] == "3" and cp["TRAJ"]["COORDINATES"] == "X Y Z"
+    assert dict(cp["PLANT_HAL_Z"]) == dict(cp["PLANT_HAL_X"])
+    assert all(cp["JOINT_2"][k] == cp["JOINT_0"][k] for k in ("P", "I", "D", "FF1", "FF2"))
+    hal = lx.lm.expand_hal((lx.lm.HERE / "machine.hal").read_text(), "XYZ")
+    assert "loadrt pid names=pid.x,pid.y,pid.z" in hal
+    assert "net z-pos-cmd joint.2.motor-pos-cmd => pid.z.command" in hal
+    with pytest.raises(SystemExit, match="axes must be one of X, XY, XYZ"):
+        lx.lm.Machine(axes="XZ")
+
+
+def test_a_machine_starts_from_a_copy_of_its_run_ini_with_other_gains(tmp_path):
+    """machine.py start --ini: a run directory's INI (say with tuned [JOINT_n] lines) is derived
+    afresh, not twice."""
+    first = tmp_path / "first.ini"
+    lx.lm.write_ini(lx.lm.HERE / "machine.ini", first, {"y.gap_mm": 0.02}, tmp_path / "display.py", "XY")
+    edited = tmp_path / "edited.ini"
+    edited.write_text(first.read_text().replace("P = 7.0", "P = 70.0", 1))
+    lx.lm.write_ini(edited, tmp_path / "second.ini", {}, tmp_path / "display.py", "XY")
+    text = (tmp_path / "second.ini").read_text()
+    assert text.splitlines().count("[PLANT_HAL_Y]") == 1 and text.count(lx.lm.DERIVED) == 2
+    cp = configparser.ConfigParser(strict=False, interpolation=None)
+    cp.optionxform = str
+    cp.read_string(text)
+    assert cp["JOINT_1"]["P"] == "70.0"
+    assert float(cp["PLANT_HAL_Y"]["GAP_MM"]) == 0.0  # overrides belong to a start, not to the file
 
 
 # -- on LinuxCNC ---------------------------------------------------------------------------------
@@ -107,3 +140,32 @@ def test_the_ballbar_test_reads_on_linuxcnc_as_predicted(identified):
     for got, want in zip(t["predicted"]["runs"], t["measured"]["runs"]):
         assert got["direction"] == want["direction"]
         assert got["circularity_um"] == pytest.approx(want["circularity_um"], rel=0.05)
+
+
+SAMPLE = "/usr/share/linuxcnc/ncfiles/gmoccapy_2_tools_with_cutter_radius_compensation.ngc"
+
+
+@pytest.mark.slow
+def test_a_linuxcnc_sample_program_is_predicted_as_the_three_axis_machine_runs_it(tmp_path):
+    """LinuxCNC's own gmoccapy sample, as shipped (tool changes, G43, G41, helical arcs, Z), on
+    the X, Y, Z machine identified from its own capture: max contour error within 5 %, rms of the
+    difference <= 10 % of the measured rms, cycle time within 1 %."""
+    lx.require_linuxcnc()
+    if not Path(SAMPLE).is_file():
+        pytest.skip(f"{SAMPLE} is missing (LinuxCNC's sample programs)")
+    m = lx.machine(axes="XYZ")
+    port = "linuxcnc://?joints=0,1,2&axes=X,Y,Z"
+    progs = lx.generate(tmp_path, seed=1, n_low=120, n_high=20, axes="XYZ")
+    assert lx.capture_run(m, progs, tmp_path / "ident.mcap", port=port).returncode == 0
+    _agent("identify", tmp_path / "ident.mcap", "--no-diagnose", "--json", tmp_path / "result.json")
+    assert lx.capture_run(m, [Path(SAMPLE)], tmp_path / "sample.mcap", port=port).returncode == 0
+    _agent("predict", SAMPLE, "--machine", tmp_path / "result.json", "--ini", m.run_dir / "machine.ini",
+           "--tool-table", m.run_dir / "tool.tbl", "--against", tmp_path / "sample.mcap", "--json", tmp_path / "p.json")
+    c = json.loads((tmp_path / "p.json").read_text())["comparisons"][0]
+    s = c["standalone"]
+    print(f"\nmeasured {c['measured_max_abs_mm'] * 1e3:.2f} µm, predicted {s['predicted_max_abs_mm'] * 1e3:.2f} µm, "
+          f"rms diff {s['rms_difference_ratio']:.3f}, cycle {c['measured_cycle_time_s']:.3f} / "
+          f"{c['predicted_cycle_time_s']:.3f} s")
+    assert abs(s["max_ratio"] - 1) <= 0.05
+    assert s["rms_difference_ratio"] <= 0.10
+    assert c["predicted_cycle_time_s"] == pytest.approx(c["measured_cycle_time_s"], rel=0.01)

@@ -19,6 +19,10 @@ def tune(
     propose: List[str] = typer.Option([], "--propose", help="Check these gains [AXIS.]NAME=VALUE instead of searching."),
     radius: float = typer.Option(100.0, "--radius", help="Ballbar radius, mm."),
     feed: float = typer.Option(1000.0 / 60.0, "--feed", help="Ballbar feed (the test feed), mm/s."),
+    lead_deg: Optional[float] = typer.Option(None, "--lead-deg",
+                                             help="Judge the ballbar as run: one program with feed-in/out arcs of "
+                                                  "this many degrees (agent ballbar's, default there 180); without, "
+                                                  "the two circles each from rest."),
     axes: Optional[str] = typer.Option(None, "--axes", help="Ballbar plane, two axis letters (default X,Y)."),
     u_max: float = typer.Option(10.0, "--u-max", help="Output limit, V, for p-pi/pid (LinuxCNC: MAX_OUTPUT)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write gains, margins and predictions as JSON."),
@@ -43,7 +47,7 @@ def tune(
     plane = [a.strip().upper() for a in axes.split(",") if a.strip()] if axes else None
     result, diff = tune_files(machine, controller=controller, ini=ini, gains=gain, propose=propose, programs=program,
                               ballbar=ballbar, radius=radius, feed=feed, axes=plane, u_max=u_max, json_out=json_out,
-                              integration=plant_integration)
+                              integration=plant_integration, lead_deg=lead_deg)
     what = {"circularity_um": "circularity", "contour_error_max_um": "max contour error",
             "tracking_error_max_um": "max tracking error"}[result.test]
     change = 100.0 * (result.predicted_after / result.predicted_before - 1.0) if result.predicted_before else 0.0

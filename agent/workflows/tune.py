@@ -44,16 +44,23 @@ def parse_gains(form: str, axes: Sequence[str], assignments: Sequence[str], flag
 def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Sequence[str], propose: Sequence[str],
                programs: Sequence[Path], ballbar: bool, radius: float, feed: float, axes: Sequence[str] | None,
                u_max: float, json_out: Path | None,
-               integration: str = "continuous") -> tuple[Tuning, list[str]]:
-    """Run the tuning; returns it and the INI diff lines (empty without an INI)."""
+               integration: str = "continuous", lead_deg: float | None = None) -> tuple[Tuning, list[str]]:
+    """Run the tuning; returns it and the INI diff lines (empty without an INI).
+
+    With an INI the test is planned with its per-axis limits, as LinuxCNC plans it (and as
+    ``agent predict --ini`` does); ``lead_deg``: the ballbar as one program with feed-in/out arcs."""
     vm = load_virtual_machine(machine)
+    if ini is not None:
+        from gcode_gen.planner_limits import read_linuxcnc_ini
+
+        vm = vm.with_planner_limits(read_linuxcnc_ini(ini))
     if bool(programs) == bool(ballbar):
         raise InputError("give --program FILE or --ballbar (one of the two): what the tuning is judged on")
     if ballbar:
         plane = tuple(axes) if axes else tuple(a for a in ("X", "Y") if a in vm.axes)
         if len(plane) != 2:
             raise InputError.about("axes", f"the ballbar needs two axes; {vm.name} has {', '.join(vm.axes)}")
-        test = Criterion.ballbar(vm, plane, radius, feed)
+        test = Criterion.ballbar(vm, plane, radius, feed, lead_deg=lead_deg)
     else:
         test = Criterion.program(vm, programs)
     joints: dict[str, int] = {}

@@ -1,7 +1,11 @@
 """The figures a tuning is judged by, predicted on the recovered plants with the sampled loop.
 
 * ``ballbar``: the ISO 230-4 circle pair (ccw, cw, started at 45°, :mod:`ident.ballbar`),
-  figure = the larger circularity G of the two runs, µm;
+  figure = the larger circularity G of the two data arcs, µm.  With ``lead_deg`` the test as a
+  machine runs it (:func:`ident.synthetic_ballbar.ballbar_program`, what ``agent ballbar
+  --program-out`` writes: one program, feed-in and feed-out arcs, ccw then cw after a dwell,
+  from rest on the feed-in arc's start with the loop's state at zero); without, the two
+  circles each from rest at their start point (the start transient is then on the data arc);
 * ``program``: a part program, figure = max |contour error| over its feed moves, µm
   (:func:`ident.prediction.contour_of_run`; the tracking error for a one-axis program).
 
@@ -38,16 +42,23 @@ class Criterion:
     radius: float = 0.0
     feed: float = 0.0
     centre: tuple[float, float] = (0.0, 0.0)
+    data_lines: tuple[int, ...] = ()  # per run, the program line of its data arc (ballbar)
 
     @classmethod
     def ballbar(cls, vm: VirtualMachine, axes: tuple[str, str], radius: float, feed: float,
-                centre: tuple[float, float] = (0.0, 0.0)) -> "Criterion":
+                centre: tuple[float, float] = (0.0, 0.0), lead_deg: float | None = None) -> "Criterion":
+        """The ballbar pair; ``lead_deg``: as one program with feed-in/out arcs (module docstring)."""
         from gcode_gen.toolpaths import circle
-        from ident.synthetic_ballbar import START_DEG
+        from ident.synthetic_ballbar import START_DEG, ballbar_program, data_arc_lines, start_point
 
-        runs = tuple(vm.command([circle(size=2 * radius, feed=feed, center=centre, axes=axes, direction=d,
-                                        start_deg=START_DEG, name=f"ballbar_{d}")]) for d in ("ccw", "cw"))
-        return cls("ballbar", runs, tuple(axes), radius, feed, tuple(centre))
+        if lead_deg is None:
+            runs = tuple(vm.command([circle(size=2 * radius, feed=feed, center=centre, axes=axes, direction=d,
+                                            start_deg=START_DEG, name=f"ballbar_{d}")]) for d in ("ccw", "cw"))
+            return cls("ballbar", runs, tuple(axes), radius, feed, tuple(centre),
+                       tuple(max(r.blocks[0]) for r in runs))
+        run = vm.command([ballbar_program(radius, feed, centre, axes, lead_deg)],
+                         start=dict(zip(axes, start_point(radius, centre, lead_deg))))
+        return cls("ballbar", (run, run), tuple(axes), radius, feed, tuple(centre), data_arc_lines(run, lead_deg))
 
     @classmethod
     def program(cls, vm: VirtualMachine, programs: Sequence[ProgramLike]) -> "Criterion":
@@ -93,11 +104,13 @@ def predicted_figure(test: Criterion, gains: Mapping[str, Gains], plants: Mappin
     if test.kind == "ballbar":
         from ident.ballbar import analyse_ballbar, ballbar_run
 
-        runs, ratio = [], 0.0
-        for run, direction in zip(test.runs, ("ccw", "cw")):
-            act, r = follow(run, gains, plants, test.axes)
+        runs, ratio, followed = [], 0.0, {}
+        for run, direction, line in zip(test.runs, ("ccw", "cw"), test.data_lines):
+            if id(run) not in followed:  # the one-program test is followed once
+                followed[id(run)] = follow(run, gains, plants, test.axes)
+            act, r = followed[id(run)]
             ratio = max(ratio, r)
-            arc = np.flatnonzero(run.line == max(run.blocks[0]))
+            arc = np.flatnonzero(run.line == line)
             x, y = test.axes
             if not (np.all(np.isfinite(act[x])) and np.all(np.isfinite(act[y]))):
                 return math.inf, ratio
