@@ -90,6 +90,7 @@ __all__ = [
     "substeps",
     "model_substeps",
     "simulate_augmented",
+    "simulate_augmented_many",
 ]
 
 #: The effects of SPEC §7 in a fixed order; the flag vector follows it (the axis model's
@@ -499,23 +500,326 @@ def _kernel(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, th, flags, ep, modes
                 q += h * qd
     # dead time on the recorded position (capture/transport), fractional, inside segments
     if on_td and not td_loop and tau > 0.0:
-        sh = tau / Ts
-        ip = int(sh)
-        fr = sh - ip
-        res = out.copy()
-        s0 = 0
-        for k in range(n):
+        _delay_output(out, starts, tau, Ts)
+
+
+@njit(cache=True, nogil=True)
+def _delay_output(out, starts, tau, Ts):
+    """``out`` (recorded positions) delayed by ``tau`` s in place, fractionally, inside segments."""
+    n = out.size
+    sh = tau / Ts
+    ip = int(sh)
+    fr = sh - ip
+    res = out.copy()
+    s0 = 0
+    for k in range(n):
+        if starts[k]:
+            s0 = k
+        i0 = k - ip
+        i1 = k - ip - 1
+        if i0 < s0:
+            i0 = s0
+        if i1 < s0:
+            i1 = s0
+        res[k] = (1.0 - fr) * out[i0] + fr * out[i1]
+    for k in range(n):
+        out[k] = res[k]
+
+
+@njit(cache=True, nogil=True)
+def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, modes, OUT):
+    """:func:`_kernel` for P parameter sets (rows of ``TH``, ``EP``; outputs rows of ``OUT``) in lockstep.
+
+    The same flags, variants and sub-steps for every set (a finite-difference Jacobian's
+    columns), each set's arithmetic exactly that of :func:`_kernel` in the same order, so
+    each row is the same bit for bit.  Why: one simulation is a chain of dependent
+    operations (semi-implicit Euler: every sub-step waits for the last), so the processor
+    idles on latencies; the sets' chains are independent and interleave.
+    """
+    P = TH.shape[0]
+    n = xr.size
+    h = Ts / nsub
+    on_bl = flags[0] != 0
+    on_st = flags[1] != 0
+    on_rs = flags[2] != 0
+    on_td = flags[3] != 0
+    on_cy = flags[4] != 0
+    on_sa = flags[5] != 0
+    sa_windup = on_sa and modes[5] == 1
+    bl_loop = on_bl and modes[0] >= 1
+    rs_two = on_rs and modes[3] >= 1
+    fb_motor = (rs_two and modes[3] == 2) or (bl_loop and modes[0] == 2)
+    two = bl_loop or rs_two
+    td_loop = on_td and modes[1] == 1
+    cy_force = on_cy and modes[2] == 1
+    sampled = modes[4] != 0
+    causal = modes[4] == 2
+    a1 = TH[:, 0].copy()
+    a2 = TH[:, 1].copy()
+    a3 = TH[:, 2].copy()
+    b0 = TH[:, 3].copy()
+    b1 = TH[:, 4].copy()
+    b2 = TH[:, 5].copy()
+    d0 = TH[:, 6].copy()
+    d1 = TH[:, 7].copy()
+    half = np.empty(P)
+    rs = np.empty(P)
+    vs = np.empty(P)
+    wr = np.empty(P)
+    zr = np.empty(P)
+    kr = np.empty(P)
+    tau = np.empty(P)
+    tw = np.empty(P)
+    cs = np.empty(P)
+    cc = np.empty(P)
+    lim = np.empty(P)
+    mu = np.empty(P)
+    psi = np.empty(P)
+    kc = np.empty(P)
+    cdmp = np.empty(P)
+    half_c = np.empty(P)
+    dsteps = np.empty(P)
+    nbuf = np.empty(P, dtype=np.int64)
+    for p in range(P):
+        ep = EP[p]
+        half[p] = 0.5 * ep[0]
+        rs[p] = ep[1] if on_st else 1.0
+        vs[p] = ep[2] if ep[2] > 1e-9 else 1e-9
+        wr[p] = 2.0 * math.pi * ep[3]
+        zr[p] = ep[4]
+        kr[p] = ep[5]
+        tau[p] = ep[6] if on_td else 0.0
+        per = ep[7] if ep[7] > 1e-9 else 1e-9
+        tw[p] = 2.0 * math.pi / per
+        cs[p] = ep[8]
+        cc[p] = ep[9]
+        lim[p] = ep[10]
+        m_ = ep[11] if ep[11] > 0.0 else 1.0
+        psi[p] = ep[12]
+        if two:
+            if m_ <= 0.0 or m_ >= 1.0:
+                m_ = 0.8
+            wc = wr[p] if rs_two else 2.0 * math.pi * CONTACT_HZ
+            zc = zr[p] if rs_two else CONTACT_DAMPING
+            mred = m_ * (1.0 - m_)
+            kc[p] = wc * wc * mred
+            cdmp[p] = 2.0 * zc * wc * mred
+            half_c[p] = half[p] if bl_loop else 0.0
+        else:
+            kc[p] = 0.0
+            cdmp[p] = 0.0
+            half_c[p] = 0.0
+        mu[p] = m_
+        dsteps[p] = tau[p] / h if td_loop else 0.0
+        nbuf[p] = int(dsteps[p]) + 3
+    buf = np.zeros((P, int(np.max(nbuf))))
+    bi = np.zeros(P, dtype=np.int64)
+    xm = np.zeros(P)
+    v = np.zeros(P)
+    xt = np.zeros(P)
+    vt = np.zeros(P)
+    q = np.zeros(P)
+    qd = np.zeros(P)
+    ei = np.zeros(P)
+    vb = np.zeros(P)
+    vb_prev = np.zeros(P)
+    xm_prev = np.zeros(P)
+    xw = np.zeros(P)
+    wind_x = np.ones(P, dtype=np.bool_)
+    wind_h = np.ones(P, dtype=np.bool_)
+    first = np.ones(P, dtype=np.bool_)
+    u_h = np.zeros(P)
+    u_last = np.zeros(P)
+    for k in range(n):
+        last = k == n - 1 or starts[k + 1]
+        for p in range(P):
             if starts[k]:
-                s0 = k
-            i0 = k - ip
-            i1 = k - ip - 1
-            if i0 < s0:
-                i0 = s0
-            if i1 < s0:
-                i1 = s0
-            res[k] = (1.0 - fr) * out[i0] + fr * out[i1]
-        for k in range(n):
-            out[k] = res[k]
+                first[p] = True
+                xm[p] = x0[k]
+                xw[p] = xm[p]
+                xt[p] = xm[p]
+                v[p] = 0.0
+                vt[p] = 0.0
+                q[p] = 0.0
+                qd[p] = 0.0
+                ei[p] = (a2[p] * xm[p] - b2[p] * xr[k]) / a3[p] if a3[p] != 0.0 else 0.0
+                vb[p] = 0.0
+                vb_prev[p] = 0.0
+                u0 = 0.0
+                if warm[k]:
+                    vk = vw[k]
+                    ak = aw[k]
+                    if on_td and not td_loop:
+                        xm[p] += tau[p] * (vk + 0.5 * tau[p] * ak)
+                        vk += tau[p] * ak
+                        xt[p] = xm[p]
+                    if on_cy and not cy_force:
+                        xm[p] -= cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                        xt[p] = xm[p]
+                    v[p] = vk - 0.5 * h * ak
+                    vt[p] = v[p]
+                    lvl = 0.0
+                    if vk != 0.0:
+                        lvl = d0[p] if vk > 0.0 else d1[p]
+                        if on_st:
+                            lvl *= 1.0 + (rs[p] - 1.0) * math.exp(-(vk / vs[p]) ** 2)
+                    u0 = ak + lvl
+                    if cy_force:
+                        u0 += cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                    if two:
+                        fc = (1.0 - mu[p]) * ak + lvl
+                        if fc != 0.0:
+                            xm[p] = xt[p] + fc / kc[p] + (half_c[p] if fc > 0.0 else -half_c[p])
+                    elif on_bl:
+                        sv = vr[k] if vr[k] != 0.0 else vk
+                        if sv != 0.0:
+                            xm[p] = xt[p] + (half[p] if sv > 0.0 else -half[p])
+                    xw[p] = xm[p]
+                    xfb = xt[p] if (two and not fb_motor) else xm[p]
+                    vf = v[p]
+                    e_int = 0.0
+                    ff = b0[p] * ar[k] + b1[p] * vr[k]
+                    if sampled:
+                        vf = vk - 0.5 * Ts * ak
+                        xm_prev[p] = xm[p] - vf * Ts
+                        e_int = Ts * (xr[k] - xfb)
+                        vb[p] = vr[k] - 1.5 * ar[k] * Ts
+                        if causal:
+                            ff = b0[p] * ar[k] + b1[p] * (vr[k] - 0.5 * ar[k] * Ts)
+                        u_last[p] = u0
+                        u_h[p] = u0
+                        first[p] = False
+                    if a3[p] != 0.0:
+                        ei[p] = (u0 - ff - b2[p] * xr[k] + a2[p] * ((1.0 - psi[p]) * xfb + psi[p] * xw[p])
+                                 + a1[p] * vf) / a3[p] - e_int
+                for i in range(nbuf[p]):
+                    buf[p, i] = u0
+                bi[p] = 0
+            y = xt[p] if (on_bl or two) else xm[p]
+            if on_rs and not rs_two:
+                y += q[p]
+            if on_cy and not cy_force:
+                y += cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+            OUT[p, k] = y
+        if last:
+            continue
+        for j in range(nsub):
+            f = j / nsub
+            xrj = xr[k] + f * (xr[k + 1] - xr[k])
+            vrj = vr[k] + f * (vr[k + 1] - vr[k])
+            for p in range(P):
+                xfb = xt[p] if (two and not fb_motor) else xm[p]
+                xp = (1.0 - psi[p]) * xfb + psi[p] * xw[p]
+                if sampled:
+                    if j == 0:
+                        vfb = (xm[p] - xm_prev[p]) / Ts if not first[p] else 0.0
+                        xm_prev[p] = xm[p]
+                        ei_new = ei[p] + Ts * (xr[k] - xfb)
+                        if causal:
+                            vb_prev[p] = vb[p]
+                            if not starts[k]:
+                                vb[p] = (xr[k] - xr[k - 1]) / Ts
+                            else:
+                                vb[p] = vr[k] - 0.5 * ar[k] * Ts if warm[k] else 0.0
+                            uh = b0[p] * (vb[p] - vb_prev[p]) / Ts + b1[p] * vb[p]
+                        else:
+                            uh = b0[p] * ar[k] + b1[p] * vr[k]
+                        uh += b2[p] * xr[k] + a3[p] * ei_new - a2[p] * xp - a1[p] * vfb
+                        wh = True
+                        if on_sa:
+                            ig = (xr[k] - xfb if psi[p] == 0.0
+                                  else a3[p] * (xr[k] - xfb) - psi[p] * a2[p] * vfb)
+                            if uh > lim[p]:
+                                uh = lim[p]
+                                wh = sa_windup or ig <= 0.0
+                            elif uh < -lim[p]:
+                                uh = -lim[p]
+                                wh = sa_windup or ig >= 0.0
+                        if wh:
+                            ei[p] = ei_new
+                        u = uh if first[p] else 0.5 * (u_last[p] + uh)
+                        u_last[p] = uh
+                        u_h[p] = uh
+                        wind_h[p] = wh
+                        first[p] = False
+                    else:
+                        u = u_h[p]
+                    wind = False
+                    wind_x[p] = wind_h[p]
+                else:
+                    u = b0[p] * ar[k] + b1[p] * vrj + b2[p] * xrj + a3[p] * ei[p] - a2[p] * xp - a1[p] * v[p]
+                    wind = True
+                    wind_x[p] = True
+                    if on_sa:
+                        ig = xrj - xfb if psi[p] == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * v[p]
+                        if u > lim[p]:
+                            u = lim[p]
+                            wind = sa_windup or ig <= 0.0
+                        elif u < -lim[p]:
+                            u = -lim[p]
+                            wind = sa_windup or ig >= 0.0
+                        wind_x[p] = wind
+                if td_loop:
+                    nb = nbuf[p]
+                    buf[p, bi[p]] = u
+                    ip = int(dsteps[p])
+                    fr = dsteps[p] - ip
+                    i0 = (bi[p] - ip) % nb
+                    i1 = (bi[p] - ip - 1) % nb
+                    u = (1.0 - fr) * buf[p, i0] + fr * buf[p, i1]
+                    bi[p] = (bi[p] + 1) % nb
+                if cy_force:
+                    u -= cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                if two:
+                    dl = xm[p] - xt[p]
+                    ddl = v[p] - vt[p]
+                    hc = half_c[p]
+                    if hc > 0.0:
+                        if dl > hc:
+                            fc = kc[p] * (dl - hc) + cdmp[p] * ddl
+                            if fc < 0.0:
+                                fc = 0.0
+                        elif dl < -hc:
+                            fc = kc[p] * (dl + hc) + cdmp[p] * ddl
+                            if fc > 0.0:
+                                fc = 0.0
+                        else:
+                            fc = 0.0
+                    else:
+                        fc = kc[p] * dl + cdmp[p] * ddl
+                    vn = v[p] + h * (u - fc) / mu[p]
+                    mt = 1.0 - mu[p]
+                    vtn = _friction_step(vt[p], fc, h, mt, d0[p], d1[p], rs[p], on_st, vs[p])
+                    v[p] = vn
+                    vt[p] = vtn
+                    xm[p] += h * vn
+                    xt[p] += h * vtn
+                    if wind:
+                        ei[p] += h * (xrj - xfb)
+                    if wind_x[p]:
+                        xw[p] += h * vn
+                    continue
+                vn = _friction_step(v[p], u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
+                acc = (vn - v[p]) / h
+                v[p] = vn
+                xm[p] += h * vn
+                if wind:
+                    ei[p] += h * (xrj - xfb)
+                if wind_x[p]:
+                    xw[p] += h * vn
+                if on_bl:
+                    if xm[p] - xt[p] > half[p]:
+                        xt[p] = xm[p] - half[p]
+                    elif xm[p] - xt[p] < -half[p]:
+                        xt[p] = xm[p] + half[p]
+                if on_rs:
+                    qdd = -2.0 * zr[p] * wr[p] * qd[p] - wr[p] * wr[p] * q[p] - kr[p] * acc
+                    qd[p] += h * qdd
+                    q[p] += h * qd[p]
+    if on_td and not td_loop:
+        for p in range(P):
+            if tau[p] > 0.0:
+                _delay_output(OUT[p], starts, tau[p], Ts)
 
 
 def simulate_augmented(
@@ -592,12 +896,7 @@ def simulate_augmented(
         nsub = model_substeps(th, Ts, fl, e, md)
     out = np.empty(n)
     out_u = np.empty(n) if u_out is None else u_out
-    if warm is None:  # no warm restart: the velocity and acceleration are never read
-        unused = np.zeros(n)
-        warm_args = (np.zeros(n, dtype=np.bool_), unused, unused)
-    else:
-        warm_args = (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
-                     np.ascontiguousarray(warm[2], dtype=float))
+    warm_args = _warm_arrays(warm, n)
     _kernel(
         x_r,
         np.ascontiguousarray(derivs[0], dtype=float),
@@ -615,3 +914,58 @@ def simulate_augmented(
         out_u,
     )
     return out
+
+
+def simulate_augmented_many(
+    x_r: np.ndarray,
+    x0: np.ndarray,
+    Ts: float,
+    thetas: np.ndarray,
+    eps: np.ndarray,
+    *,
+    flags: np.ndarray,
+    modes: np.ndarray,
+    starts: np.ndarray,
+    derivs: tuple[np.ndarray, np.ndarray],
+    nsub: int,
+    warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """:func:`simulate_augmented` of several parameter sets at once, (P, N): row p is bit for bit
+    ``simulate_augmented(..., thetas[p], ep=eps[p], ...)`` with the given ``nsub``.
+
+    For the columns of a finite-difference Jacobian: the same effects, variants and
+    sub-steps, parameters differing (rows of ``thetas`` (P, 8) and ``eps`` (P, 13)).  The
+    sets are simulated in lockstep in one pass (:func:`_kernel_many`), which is faster than
+    one after the other: a single free run waits on its own chain of dependent operations.
+    """
+    x_r = np.ascontiguousarray(x_r, dtype=float)
+    n = x_r.size
+    TH = np.ascontiguousarray(thetas, dtype=float).reshape(-1, 8)
+    E = np.ascontiguousarray(eps, dtype=float).reshape(-1, N_EP)
+    fl = np.ascontiguousarray(flags, dtype=np.int64)
+    md = np.ascontiguousarray(modes, dtype=np.int64)
+    if md.size < N_MODES:
+        md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
+    out = np.full((TH.shape[0], n), np.nan)
+    # the rows simulate_augmented would refuse (a diverged fit step) stay NaN
+    ok = np.flatnonzero(np.isfinite(TH).all(axis=1) & np.isfinite(E).all(axis=1) & (E[:, 6] >= 0.0)
+                        & (E[:, 6] <= 1.0))
+    if ok.size == 0:
+        return out
+    warm_args = _warm_arrays(warm, n)
+    y = np.empty((ok.size, n))
+    _kernel_many(x_r, np.ascontiguousarray(derivs[0], dtype=float), np.ascontiguousarray(derivs[1], dtype=float),
+                 np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(starts, dtype=np.bool_), *warm_args,
+                 float(Ts), int(nsub), np.ascontiguousarray(TH[ok]), fl, np.ascontiguousarray(E[ok]), md, y)
+    out[ok] = y
+    return out
+
+
+def _warm_arrays(warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's (mask, v, a) of warm restarts: none when ``warm`` is None (v, a never read then)."""
+    if warm is None:
+        unused = np.zeros(n)
+        return np.zeros(n, dtype=np.bool_), unused, unused
+    return (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
+            np.ascontiguousarray(warm[2], dtype=float))
