@@ -159,7 +159,12 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         Y = simulate_augmented_many(chunk.x_r, chunk.x, chunk.Ts, np.array([t for t, _ in sets]),
                                     np.array([e for _, e in sets]), flags=flags, modes=spec.modes,
                                     starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
-        return np.array([weighted(y) for y in Y])
+        with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
+            R = w * (Y[:, sel] - x_m)  # element by element as weighted() does
+            for r in R:
+                if not np.isfinite(r @ r):
+                    r[:] = 1e3
+        return R
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
         # the Jacobian's columns simulated together, in two threads (the kernel runs outside
