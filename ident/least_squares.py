@@ -8,6 +8,8 @@ version, spends fewer simulations an iteration where a budget matters more than 
 
 from __future__ import annotations
 
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,7 +46,8 @@ class LMResult:
 
 
 def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_step: bool = False,
-               ftol: float = 1e-5, ftol_iter: int = 2, xtol: float = 1e-8) -> LMResult:
+               ftol: float = 1e-5, ftol_iter: int = 2, xtol: float = 1e-8, parallel: bool = False,
+               resid_many=None) -> LMResult:
     """Minimise ½‖r(z)‖² subject to lb ≤ z ≤ ub by a projected Levenberg–Marquardt.
 
     Each iteration takes a forward-difference Jacobian J (one residual evaluation per
@@ -81,6 +84,14 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
     xtol : float
         Stop when an accepted step moves every parameter by at most
         ``xtol * (xtol + |z[j]|)``.
+    parallel : bool
+        Take the Jacobian's columns in two threads (:func:`_jacobian`): for a ``resid`` that
+        is safe to call from several threads at once and spends its time outside the GIL
+        (a compiled simulation).  The result is the same bit for bit.
+    resid_many : callable, optional
+        ``resid_many(Z) -> ndarray (P, m)``: row p exactly ``resid(Z[p])``, for several
+        points at once (the Jacobian's columns; a simulation of several parameter sets in
+        one pass is faster than one after the other).  The result is the same bit for bit.
 
     Returns
     -------
@@ -120,10 +131,8 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
     small = 0  # consecutive accepted steps with a relative decrease below ftol
     retried = False  # the last iteration found no descent: its Jacobian was re-taken with h0 = step / 10
     for it in range(max_iter):
-        J = np.empty((r.size, n), order="F")
-        for j in range(n):
-            nfev += 1
-            J[:, j] = _fd_column(resid, z, r, j, h0, ub, relative_step)
+        J = _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many)
+        nfev += n
         A, g = _normal(J, r)
         free = _free(z, g, lb, ub)
         if free.size == 0:
@@ -163,7 +172,7 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
 
 
 def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float = 1e-5,
-              ftol_iter: int = 2) -> LMResult:
+              ftol_iter: int = 2, parallel: bool = False, resid_many=None) -> LMResult:
     """:func:`bounded_lm` with a secant Jacobian: one or two residual evaluations per iteration.
 
     The secant version of Marquardt's method (Madsen, Nielsen & Tingleff, *Methods for
@@ -180,8 +189,8 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
     1–2 evaluations instead of ``n + 1``: a fixed budget of evaluations (``max_nfev``,
     the differences included) goes several times further from a poor start, at the price
     of less accurate steps near the minimum (polish with :func:`bounded_lm`).  Bounds,
-    ``step``, ``ftol`` and ``ftol_iter`` as in :func:`bounded_lm` (the step absolute, in
-    the units of z).
+    ``step``, ``ftol``, ``ftol_iter``, ``parallel`` and ``resid_many`` as in :func:`bounded_lm`
+    (the step absolute, in the units of z).
     """
     z, lb, ub, step = _box(z0, lb, ub, step)
     n = z.size
@@ -191,11 +200,8 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
 
     def jacobian() -> np.ndarray:
         nonlocal nfev
-        J = np.empty((r.size, n), order="F")
-        for j in range(n):
-            J[:, j] = _fd_column(resid, z, r, j, step, ub, False)
         nfev += n
-        return J
+        return _jacobian(resid, z, r, step, ub, False, parallel, resid_many)
 
     J = jacobian()
     lam = _LAM0
@@ -259,11 +265,96 @@ def _normal(J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return normal_products(J, r)
 
 
+#: Helper threads of :func:`_jacobian` (made on first use; shared by every caller).
+_HELPERS: ThreadPoolExecutor | None = None
+_HELPERS_LOCK = threading.Lock()
+
+
+def _helpers() -> ThreadPoolExecutor:
+    global _HELPERS
+    with _HELPERS_LOCK:
+        if _HELPERS is None:
+            _HELPERS = ThreadPoolExecutor(max_workers=2, thread_name_prefix="lm-jacobian")
+        return _HELPERS
+
+
+def _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many=None) -> np.ndarray:
+    """The forward-difference Jacobian (columns as :func:`_fd_column`), stored by columns.
+
+    ``resid_many``: the columns' points evaluated together (see :func:`bounded_lm`).
+    ``parallel``: the columns in two groups, which the calling thread and a helper thread
+    take in turn from a shared counter, so the caller never waits for a helper that has not
+    started (on a busy machine the caller then takes both groups itself).  Each column is
+    the same computation whichever thread makes it, so J is the same bit for bit.  Why
+    threads here: the searches of the diagnosis run side by side in two workers, but their
+    lengths differ, and a worker left alone (the last search, a base re-fit, the
+    re-estimation) would otherwise leave the second core idle.
+    """
+    n = z.size
+    J = np.empty((r.size, n), order="F")
+
+    def columns(js: range) -> None:
+        if resid_many is None:
+            for j in js:
+                J[:, j] = _fd_column(resid, z, r, j, h0, ub, relative_step)
+            return
+        hs = [_fd_step(z, j, h0, ub, relative_step) for j in js]
+        Z = np.repeat(z[None, :], len(hs), axis=0)
+        for i, (j, h) in enumerate(zip(js, hs)):
+            Z[i, j] += h
+        R = resid_many(Z)
+        for i, (j, h) in enumerate(zip(js, hs)):
+            J[:, j] = (R[i] - r) / h
+
+    if not parallel or n < 2:
+        columns(range(n))
+        return J
+    groups = [range(0, (n + 1) // 2), range((n + 1) // 2, n)]
+    lock = threading.Lock()
+    state = {"next": 0, "done": 0, "error": None}
+    finished = threading.Event()
+
+    def take() -> None:
+        while True:
+            with lock:
+                g = state["next"]
+                if g >= len(groups) or state["error"] is not None:
+                    return
+                state["next"] = g + 1
+            try:
+                columns(groups[g])
+            except BaseException as exc:  # handed to the caller, which raises it
+                with lock:
+                    state["error"] = exc
+                finished.set()
+                return
+            with lock:
+                state["done"] += 1
+                if state["done"] == len(groups):
+                    finished.set()
+
+    _helpers().submit(_help, take)
+    take()
+    finished.wait()
+    if state["error"] is not None:
+        raise state["error"]
+    return J
+
+
+def _help(take) -> None:
+    """A helper thread's share of a Jacobian (a function of its own: a benchmark can time it)."""
+    take()
+
+
+def _fd_step(z, j, h0, ub, relative_step) -> float:
+    """The difference step along parameter j (towards the inside at an upper bound)."""
+    h = h0[j] * max(1.0, abs(z[j])) if relative_step else h0[j]
+    return -h if z[j] + h > ub[j] else h
+
+
 def _fd_column(resid, z, r, j, h0, ub, relative_step) -> np.ndarray:
     """Forward difference of the residual along parameter j (towards the inside at an upper bound)."""
-    h = h0[j] * max(1.0, abs(z[j])) if relative_step else h0[j]
-    if z[j] + h > ub[j]:
-        h = -h
+    h = _fd_step(z, j, h0, ub, relative_step)
     zj = z.copy()
     zj[j] += h
     return (resid(zj) - r) / h

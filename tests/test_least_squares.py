@@ -156,6 +156,38 @@ def test_an_exception_in_the_residual_propagates():
         bounded_lm(resid, [0.0, 0.0], [-5.0, -5.0], [5.0, 5.0])
 
 
+@pytest.mark.parametrize("solver", ["bounded_lm", "secant_lm"])
+def test_jacobian_columns_in_two_threads_and_together_give_the_same_search_bit_for_bit(solver):
+    f, z0, lb, ub = _decays()
+    many_rows = []
+
+    def many(Z):  # several points at once, each exactly f(z)
+        many_rows.append(len(Z))
+        return np.array([f(z) for z in Z])
+
+    run = (lambda **kw: bounded_lm(f, z0, lb, ub, max_iter=15, **kw)) if solver == "bounded_lm" else \
+        (lambda **kw: secant_lm(f, z0, lb, ub, max_nfev=60, **kw))
+    serial = run()
+    for kw in (dict(parallel=True), dict(resid_many=many), dict(parallel=True, resid_many=many)):
+        other = run(**kw)
+        np.testing.assert_array_equal(other.z, serial.z)
+        assert (other.cost, other.nfev, other.message) == (serial.cost, serial.nfev, serial.message)
+    assert many_rows and max(many_rows) > 1  # the columns were asked for together
+
+
+def test_an_exception_in_the_residual_propagates_from_the_helper_thread_too():
+    class Stop(Exception):
+        pass
+
+    def resid(z):
+        if z[1] != 0.0:  # the second column's point, whichever thread takes it
+            raise Stop
+        return np.array([z[0] - 1.0, z[1] + 1.0])
+
+    with pytest.raises(Stop):
+        bounded_lm(resid, [0.0, 0.0], [-5.0, -5.0], [5.0, 5.0], parallel=True)
+
+
 def _decays():
     """r = Σ a_i exp(−b_i t) − y over four decays (8 parameters), a start and a box."""
     t = np.linspace(0.0, 1.0, 400)
@@ -210,7 +242,8 @@ def test_secant_lm_stops_when_no_step_can_be_computed():
 
 def test_the_module_imports_numpy_only():
     # and its fixed-order linear algebra (ident.fixed_order) numpy and numba: no scipy
-    for module, allowed in (("least_squares", {"numpy", "__future__", "dataclasses", "ident"}),
+    for module, allowed in (("least_squares", {"numpy", "__future__", "dataclasses", "ident", "threading",
+                                               "concurrent"}),
                             ("fixed_order", {"numpy", "__future__", "numba"})):
         path = Path(__file__).resolve().parents[1] / "ident" / f"{module}.py"
         names = set()

@@ -67,6 +67,11 @@ old and new value: without it the model leads the digital loop by half a sub-ste
 at nsub = 2 on a PID drive), and a fitted dead time would take that up.
 Every contiguous segment restarts at rest at the recorded actual position, or, at a warm
 start (a window cut out of a longer recording, ``warm``), on the recorded state mid-move.
+
+One compiled kernel (:func:`_kernel_many`) simulates one parameter set
+(:func:`simulate_augmented`) or several in lockstep (:func:`simulate_augmented_many`, the
+columns of a finite-difference Jacobian): each set's free run is the same bit for bit
+either way, and several at once run about twice the simulations per second.
 """
 
 from __future__ import annotations
@@ -90,6 +95,7 @@ __all__ = [
     "substeps",
     "model_substeps",
     "simulate_augmented",
+    "simulate_augmented_many",
 ]
 
 #: The effects of SPEC §7 in a fixed order; the flag vector follows it (the axis model's
@@ -221,16 +227,45 @@ def _friction_step(v: float, F: float, h: float, m: float, d0: float, d1: float,
 
 
 @njit(cache=True, nogil=True)
-def _kernel(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, th, flags, ep, modes, out, out_u):
-    a1 = th[0]
-    a2 = th[1]
-    a3 = th[2]
-    b0 = th[3]
-    b1 = th[4]
-    b2 = th[5]
-    d0 = th[6]
-    d1 = th[7]
+def _delay_output(out, starts, tau, Ts):
+    """``out`` (recorded positions) delayed by ``tau`` s in place, fractionally, inside segments."""
+    n = out.size
+    sh = tau / Ts
+    ip = int(sh)
+    fr = sh - ip
+    res = out.copy()
+    s0 = 0
+    for k in range(n):
+        if starts[k]:
+            s0 = k
+        i0 = k - ip
+        i1 = k - ip - 1
+        if i0 < s0:
+            i0 = s0
+        if i1 < s0:
+            i1 = s0
+        res[k] = (1.0 - fr) * out[i0] + fr * out[i1]
+    for k in range(n):
+        out[k] = res[k]
+
+
+@njit(cache=True, nogil=True)
+def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, modes, OUT, OUT_U):
+    """The free run of eq. 3.3 and the effects of :data:`EFFECTS` for P parameter sets in lockstep.
+
+    Rows of ``TH`` (P, 8) and ``EP`` (P, 13) are the sets, rows of ``OUT`` and ``OUT_U`` (P, N)
+    their recorded positions and the u applied at each sample (``OUT_U`` of no columns: not
+    wanted); flags, variants and sub-steps
+    are common (a finite-difference Jacobian's columns).  Each set's arithmetic is the same,
+    in the same order, whatever the other sets, so a row is bit for bit that set's free
+    run alone (P = 1, :func:`simulate_augmented`).  Why several at once: one free run is a
+    chain of dependent operations (semi-implicit Euler: every sub-step waits for the last),
+    so the processor idles on latencies; the sets' chains are independent and interleave
+    (about twice the simulations per second for 6–12 sets).
+    """
+    P = TH.shape[0]
     n = xr.size
+    want_u = OUT_U.shape[1] == n
     h = Ts / nsub
     on_bl = flags[0] != 0
     on_st = flags[1] != 0
@@ -238,284 +273,285 @@ def _kernel(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, th, flags, ep, modes
     on_td = flags[3] != 0
     on_cy = flags[4] != 0
     on_sa = flags[5] != 0
-    half = 0.5 * ep[0]
-    rs = ep[1] if on_st else 1.0
-    vs = ep[2] if ep[2] > 1e-9 else 1e-9
-    wr = 2.0 * math.pi * ep[3]
-    zr = ep[4]
-    kr = ep[5]
-    tau = ep[6] if on_td else 0.0
-    per = ep[7] if ep[7] > 1e-9 else 1e-9
-    cs = ep[8]
-    cc = ep[9]
-    lim = ep[10]
-    mu = ep[11] if ep[11] > 0.0 else 1.0
-    psi = ep[12]
     sa_windup = on_sa and modes[5] == 1
     bl_loop = on_bl and modes[0] >= 1
     rs_two = on_rs and modes[3] >= 1
-    # semi-closed two-mass drive: every loop term reads the motor, the table is recorded
     fb_motor = (rs_two and modes[3] == 2) or (bl_loop and modes[0] == 2)
     two = bl_loop or rs_two
-    if two:
-        # two-mass drive: motor (share mu of J) and table coupled by a spring-damper whose
-        # free-free mode is the resonance, or a stiff contact (CONTACT_HZ, ζ 0.5) across a gap
-        if mu <= 0.0 or mu >= 1.0:
-            mu = 0.8
-        wc = wr if rs_two else 2.0 * math.pi * CONTACT_HZ
-        zc = zr if rs_two else CONTACT_DAMPING
-        mred = mu * (1.0 - mu)
-        kc = wc * wc * mred
-        cdmp = 2.0 * zc * wc * mred
-        half_c = half if bl_loop else 0.0
-    else:
-        kc = 0.0
-        cdmp = 0.0
-        half_c = 0.0
-    vt = 0.0
     td_loop = on_td and modes[1] == 1
     cy_force = on_cy and modes[2] == 1
-    # ring buffer of u for a dead time inside the loop (fractional, in sub-steps)
-    dsteps = tau / h if td_loop else 0.0
-    nbuf = int(dsteps) + 3
-    buf = np.zeros(nbuf)
-    bi = 0
-    xm = 0.0
-    v = 0.0
-    xt = 0.0
-    q = 0.0
-    qd = 0.0
-    ei = 0.0
-    tw = 2.0 * math.pi / per
     sampled = modes[4] != 0
     causal = modes[4] == 2
-    vb = 0.0
-    vb_prev = 0.0
-    xm_prev = 0.0
-    xw = 0.0
-    wind_x = True
-    first = True
-    u_h = 0.0
-    u_last = 0.0
+    a1 = TH[:, 0].copy()
+    a2 = TH[:, 1].copy()
+    a3 = TH[:, 2].copy()
+    b0 = TH[:, 3].copy()
+    b1 = TH[:, 4].copy()
+    b2 = TH[:, 5].copy()
+    d0 = TH[:, 6].copy()
+    d1 = TH[:, 7].copy()
+    half = np.empty(P)
+    rs = np.empty(P)
+    vs = np.empty(P)
+    wr = np.empty(P)
+    zr = np.empty(P)
+    kr = np.empty(P)
+    tau = np.empty(P)
+    tw = np.empty(P)
+    cs = np.empty(P)
+    cc = np.empty(P)
+    lim = np.empty(P)
+    mu = np.empty(P)
+    psi = np.empty(P)
+    kc = np.empty(P)
+    cdmp = np.empty(P)
+    half_c = np.empty(P)
+    dsteps = np.empty(P)
+    nbuf = np.empty(P, dtype=np.int64)
+    for p in range(P):
+        ep = EP[p]
+        half[p] = 0.5 * ep[0]
+        rs[p] = ep[1] if on_st else 1.0
+        vs[p] = ep[2] if ep[2] > 1e-9 else 1e-9
+        wr[p] = 2.0 * math.pi * ep[3]
+        zr[p] = ep[4]
+        kr[p] = ep[5]
+        tau[p] = ep[6] if on_td else 0.0
+        per = ep[7] if ep[7] > 1e-9 else 1e-9
+        tw[p] = 2.0 * math.pi / per
+        cs[p] = ep[8]
+        cc[p] = ep[9]
+        lim[p] = ep[10]
+        m_ = ep[11] if ep[11] > 0.0 else 1.0
+        psi[p] = ep[12]
+        if two:
+            if m_ <= 0.0 or m_ >= 1.0:
+                m_ = 0.8
+            wc = wr[p] if rs_two else 2.0 * math.pi * CONTACT_HZ
+            zc = zr[p] if rs_two else CONTACT_DAMPING
+            mred = m_ * (1.0 - m_)
+            kc[p] = wc * wc * mred
+            cdmp[p] = 2.0 * zc * wc * mred
+            half_c[p] = half[p] if bl_loop else 0.0
+        else:
+            kc[p] = 0.0
+            cdmp[p] = 0.0
+            half_c[p] = 0.0
+        mu[p] = m_
+        dsteps[p] = tau[p] / h if td_loop else 0.0
+        nbuf[p] = int(dsteps[p]) + 3
+    buf = np.zeros((P, int(np.max(nbuf))))
+    bi = np.zeros(P, dtype=np.int64)
+    xm = np.zeros(P)
+    v = np.zeros(P)
+    xt = np.zeros(P)
+    vt = np.zeros(P)
+    q = np.zeros(P)
+    qd = np.zeros(P)
+    ei = np.zeros(P)
+    vb = np.zeros(P)
+    vb_prev = np.zeros(P)
+    xm_prev = np.zeros(P)
+    xw = np.zeros(P)
+    wind_x = np.ones(P, dtype=np.bool_)
+    wind_h = np.ones(P, dtype=np.bool_)
+    first = np.ones(P, dtype=np.bool_)
+    u_h = np.zeros(P)
+    u_last = np.zeros(P)
     for k in range(n):
-        if starts[k]:
-            first = True
-            xm = x0[k]
-            xw = xm
-            xt = xm
-            v = 0.0
-            vt = 0.0
-            q = 0.0
-            qd = 0.0
-            ei = (a2 * xm - b2 * xr[k]) / a3 if a3 != 0.0 else 0.0
-            vb = 0.0
-            vb_prev = 0.0
-            u0 = 0.0
-            if warm[k]:
-                # restart mid-move on the recorded state: position, velocity and (through
-                # the integral, holding the force against friction) acceleration, a gap's
-                # far side leading the table the way the command moves
-                vk = vw[k]
-                ak = aw[k]
-                if on_td and not td_loop:  # the recording lags the drive by the capture delay
-                    xm += tau * (vk + 0.5 * tau * ak)
-                    vk += tau * ak
-                    xt = xm
-                if on_cy and not cy_force:  # the recording holds the position error too
-                    xm -= cs * math.sin(tw * xm) + cc * math.cos(tw * xm)
-                    xt = xm
-                v = vk - 0.5 * h * ak  # semi-implicit Euler: velocities at half sub-steps
-                vt = v
-                lvl = 0.0
-                if vk != 0.0:
-                    lvl = d0 if vk > 0.0 else d1
-                    if on_st:
-                        lvl *= 1.0 + (rs - 1.0) * math.exp(-(vk / vs) ** 2)
-                u0 = ak + lvl
-                if cy_force:  # the drive overcomes the position-periodic force as well
-                    u0 += cs * math.sin(tw * xm) + cc * math.cos(tw * xm)
-                if two:
-                    # the coupling carries the table's inertia and friction: a gap closed on
-                    # the side that force pushes, the spring or contact compressed by it
-                    fc = (1.0 - mu) * ak + lvl
-                    if fc != 0.0:
-                        xm = xt + fc / kc + (half_c if fc > 0.0 else -half_c)
-                elif on_bl:  # a table held by its friction is pushed the way the command moves
-                    sv = vr[k] if vr[k] != 0.0 else vk
-                    if sv != 0.0:
-                        xm = xt + (half if sv > 0.0 else -half)
-                xw = xm
-                xfb = xt if (two and not fb_motor) else xm
-                vf = v
-                e_int = 0.0
-                ff = b0 * ar[k] + b1 * vr[k]
-                if sampled:  # the loop reads a backward difference, integrates before u
-                    vf = vk - 0.5 * Ts * ak
-                    xm_prev = xm - vf * Ts
-                    e_int = Ts * (xr[k] - xfb)
-                    vb = vr[k] - 1.5 * ar[k] * Ts  # the causal feed-forward's last difference
-                    if causal:
-                        ff = b0 * ar[k] + b1 * (vr[k] - 0.5 * ar[k] * Ts)
-                    u_last = u0
-                    u_h = u0
-                    first = False
-                if a3 != 0.0:
-                    ei = (u0 - ff - b2 * xr[k] + a2 * ((1.0 - psi) * xfb + psi * xw) + a1 * vf) / a3 - e_int
-            for i in range(nbuf):
-                buf[i] = u0
-            bi = 0
-        y = xt if (on_bl or two) else xm
-        if on_rs and not rs_two:
-            y += q
-        if on_cy and not cy_force:
-            y += cs * math.sin(tw * xm) + cc * math.cos(tw * xm)
-        out[k] = y
-        out_u[k] = 0.0
-        if k == n - 1 or starts[k + 1]:
+        last = k == n - 1 or starts[k + 1]
+        for p in range(P):
+            if starts[k]:
+                first[p] = True
+                xm[p] = x0[k]
+                xw[p] = xm[p]
+                xt[p] = xm[p]
+                v[p] = 0.0
+                vt[p] = 0.0
+                q[p] = 0.0
+                qd[p] = 0.0
+                ei[p] = (a2[p] * xm[p] - b2[p] * xr[k]) / a3[p] if a3[p] != 0.0 else 0.0
+                vb[p] = 0.0
+                vb_prev[p] = 0.0
+                u0 = 0.0
+                if warm[k]:
+                    vk = vw[k]
+                    ak = aw[k]
+                    if on_td and not td_loop:
+                        xm[p] += tau[p] * (vk + 0.5 * tau[p] * ak)
+                        vk += tau[p] * ak
+                        xt[p] = xm[p]
+                    if on_cy and not cy_force:
+                        xm[p] -= cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                        xt[p] = xm[p]
+                    v[p] = vk - 0.5 * h * ak
+                    vt[p] = v[p]
+                    lvl = 0.0
+                    if vk != 0.0:
+                        lvl = d0[p] if vk > 0.0 else d1[p]
+                        if on_st:
+                            lvl *= 1.0 + (rs[p] - 1.0) * math.exp(-(vk / vs[p]) ** 2)
+                    u0 = ak + lvl
+                    if cy_force:
+                        u0 += cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                    if two:
+                        fc = (1.0 - mu[p]) * ak + lvl
+                        if fc != 0.0:
+                            xm[p] = xt[p] + fc / kc[p] + (half_c[p] if fc > 0.0 else -half_c[p])
+                    elif on_bl:
+                        sv = vr[k] if vr[k] != 0.0 else vk
+                        if sv != 0.0:
+                            xm[p] = xt[p] + (half[p] if sv > 0.0 else -half[p])
+                    xw[p] = xm[p]
+                    xfb = xt[p] if (two and not fb_motor) else xm[p]
+                    vf = v[p]
+                    e_int = 0.0
+                    ff = b0[p] * ar[k] + b1[p] * vr[k]
+                    if sampled:
+                        vf = vk - 0.5 * Ts * ak
+                        xm_prev[p] = xm[p] - vf * Ts
+                        e_int = Ts * (xr[k] - xfb)
+                        vb[p] = vr[k] - 1.5 * ar[k] * Ts
+                        if causal:
+                            ff = b0[p] * ar[k] + b1[p] * (vr[k] - 0.5 * ar[k] * Ts)
+                        u_last[p] = u0
+                        u_h[p] = u0
+                        first[p] = False
+                    if a3[p] != 0.0:
+                        ei[p] = (u0 - ff - b2[p] * xr[k] + a2[p] * ((1.0 - psi[p]) * xfb + psi[p] * xw[p])
+                                 + a1[p] * vf) / a3[p] - e_int
+                for i in range(nbuf[p]):
+                    buf[p, i] = u0
+                bi[p] = 0
+            y = xt[p] if (on_bl or two) else xm[p]
+            if on_rs and not rs_two:
+                y += q[p]
+            if on_cy and not cy_force:
+                y += cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+            OUT[p, k] = y
+            if want_u:
+                OUT_U[p, k] = 0.0
+        if last:
             continue
         for j in range(nsub):
             f = j / nsub
             xrj = xr[k] + f * (xr[k + 1] - xr[k])
             vrj = vr[k] + f * (vr[k + 1] - vr[k])
-            xfb = xt if (two and not fb_motor) else xm
-            # two-mass: the position term may read the motor in part (a P-PI cascade's velocity
-            # integral is the motor position), the integral term always reads the table
-            # xw: the motor position as the integral of its velocity, frozen with the integral
-            # while saturated (a P-PI cascade's velocity integral winds no further)
-            xp = (1.0 - psi) * xfb + psi * xw
-            if sampled:
-                # digital controller: u computed at the sample from the positions read then
-                # (velocity by backward difference of the motor position), held over Ts (ZOH)
-                if j == 0:
-                    vfb = (xm - xm_prev) / Ts if not first else 0.0
-                    xm_prev = xm
-                    ei_new = ei + Ts * (xr[k] - xfb)
-                    if causal:  # the command's derivatives as the drive can take them
-                        vb_prev = vb
-                        if not starts[k]:
-                            vb = (xr[k] - xr[k - 1]) / Ts
+            for p in range(P):
+                xfb = xt[p] if (two and not fb_motor) else xm[p]
+                xp = (1.0 - psi[p]) * xfb + psi[p] * xw[p]
+                if sampled:
+                    if j == 0:
+                        vfb = (xm[p] - xm_prev[p]) / Ts if not first[p] else 0.0
+                        xm_prev[p] = xm[p]
+                        ei_new = ei[p] + Ts * (xr[k] - xfb)
+                        if causal:
+                            vb_prev[p] = vb[p]
+                            if not starts[k]:
+                                vb[p] = (xr[k] - xr[k - 1]) / Ts
+                            else:
+                                vb[p] = vr[k] - 0.5 * ar[k] * Ts if warm[k] else 0.0
+                            uh = b0[p] * (vb[p] - vb_prev[p]) / Ts + b1[p] * vb[p]
                         else:
-                            vb = vr[k] - 0.5 * ar[k] * Ts if warm[k] else 0.0
-                        u_h = b0 * (vb - vb_prev) / Ts + b1 * vb
+                            uh = b0[p] * ar[k] + b1[p] * vr[k]
+                        uh += b2[p] * xr[k] + a3[p] * ei_new - a2[p] * xp - a1[p] * vfb
+                        wh = True
+                        if on_sa:
+                            ig = (xr[k] - xfb if psi[p] == 0.0
+                                  else a3[p] * (xr[k] - xfb) - psi[p] * a2[p] * vfb)
+                            if uh > lim[p]:
+                                uh = lim[p]
+                                wh = sa_windup or ig <= 0.0
+                            elif uh < -lim[p]:
+                                uh = -lim[p]
+                                wh = sa_windup or ig >= 0.0
+                        if wh:
+                            ei[p] = ei_new
+                        u = uh if first[p] else 0.5 * (u_last[p] + uh)
+                        u_last[p] = uh
+                        u_h[p] = uh
+                        wind_h[p] = wh
+                        first[p] = False
                     else:
-                        u_h = b0 * ar[k] + b1 * vr[k]
-                    u_h += b2 * xr[k] + a3 * ei_new - a2 * xp - a1 * vfb
-                    wind_h = True
+                        u = u_h[p]
+                    wind = False
+                    wind_x[p] = wind_h[p]
+                else:
+                    u = b0[p] * ar[k] + b1[p] * vrj + b2[p] * xrj + a3[p] * ei[p] - a2[p] * xp - a1[p] * v[p]
+                    wind = True
+                    wind_x[p] = True
                     if on_sa:
-                        # integrand of the loop's integral: e, or a3·e − ψ·a2·ẋ_motor (P-PI)
-                        ig = xr[k] - xfb if psi == 0.0 else a3 * (xr[k] - xfb) - psi * a2 * vfb
-                        if u_h > lim:
-                            u_h = lim
-                            wind_h = sa_windup or ig <= 0.0
-                        elif u_h < -lim:
-                            u_h = -lim
-                            wind_h = sa_windup or ig >= 0.0
-                    if wind_h:
-                        ei = ei_new
-                    # semi-implicit Euler keeps velocities at half sub-steps: the first
-                    # sub-step spans the switch of the held u, so it gets the mean of the old
-                    # and new value (else the model leads the loop by h/2 — 0.25 ms at nsub 2,
-                    # which a fitted dead time would take up)
-                    u = u_h if first else 0.5 * (u_last + u_h)
-                    u_last = u_h
-                    first = False
-                else:
-                    u = u_h
-                wind = False  # the integral moved once, at the sample
-                wind_x = wind_h
-            else:
-                u = b0 * ar[k] + b1 * vrj + b2 * xrj + a3 * ei - a2 * xp - a1 * v
-                wind = True
-                wind_x = True
-                if on_sa:
-                    ig = xrj - xfb if psi == 0.0 else a3 * (xrj - xfb) - psi * a2 * v
-                    if u > lim:
-                        u = lim
-                        wind = sa_windup or ig <= 0.0  # conditional integration (anti-windup)
-                    elif u < -lim:
-                        u = -lim
-                        wind = sa_windup or ig >= 0.0
-                    wind_x = wind
-            if j == 0:
-                out_u[k] = u
-            if td_loop:
-                buf[bi] = u
-                # value written dsteps sub-steps ago, linearly interpolated
-                ip = int(dsteps)
-                fr = dsteps - ip
-                i0 = (bi - ip) % nbuf
-                i1 = (bi - ip - 1) % nbuf
-                u = (1.0 - fr) * buf[i0] + fr * buf[i1]
-                bi = (bi + 1) % nbuf
-            if cy_force:
-                u -= cs * math.sin(tw * xm) + cc * math.cos(tw * xm)
-            if two:
-                # coupling force per unit J (never pulling across a backlash gap)
-                dl = xm - xt
-                ddl = v - vt
-                if half_c > 0.0:
-                    if dl > half_c:
-                        fc = kc * (dl - half_c) + cdmp * ddl
-                        if fc < 0.0:
-                            fc = 0.0
-                    elif dl < -half_c:
-                        fc = kc * (dl + half_c) + cdmp * ddl
-                        if fc > 0.0:
+                        ig = xrj - xfb if psi[p] == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * v[p]
+                        if u > lim[p]:
+                            u = lim[p]
+                            wind = sa_windup or ig <= 0.0
+                        elif u < -lim[p]:
+                            u = -lim[p]
+                            wind = sa_windup or ig >= 0.0
+                        wind_x[p] = wind
+                if want_u and j == 0:
+                    OUT_U[p, k] = u
+                if td_loop:
+                    nb = nbuf[p]
+                    buf[p, bi[p]] = u
+                    ip = int(dsteps[p])
+                    fr = dsteps[p] - ip
+                    i0 = (bi[p] - ip) % nb
+                    i1 = (bi[p] - ip - 1) % nb
+                    u = (1.0 - fr) * buf[p, i0] + fr * buf[p, i1]
+                    bi[p] = (bi[p] + 1) % nb
+                if cy_force:
+                    u -= cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                if two:
+                    dl = xm[p] - xt[p]
+                    ddl = v[p] - vt[p]
+                    hc = half_c[p]
+                    if hc > 0.0:
+                        if dl > hc:
+                            fc = kc[p] * (dl - hc) + cdmp[p] * ddl
+                            if fc < 0.0:
+                                fc = 0.0
+                        elif dl < -hc:
+                            fc = kc[p] * (dl + hc) + cdmp[p] * ddl
+                            if fc > 0.0:
+                                fc = 0.0
+                        else:
                             fc = 0.0
                     else:
-                        fc = 0.0
-                else:
-                    fc = kc * dl + cdmp * ddl
-                vn = v + h * (u - fc) / mu
-                mt = 1.0 - mu
-                # the table carries the friction, with a stick phase
-                vtn = _friction_step(vt, fc, h, mt, d0, d1, rs, on_st, vs)
-                v = vn
-                vt = vtn
-                xm += h * v
-                xt += h * vt
+                        fc = kc[p] * dl + cdmp[p] * ddl
+                    vn = v[p] + h * (u - fc) / mu[p]
+                    mt = 1.0 - mu[p]
+                    vtn = _friction_step(vt[p], fc, h, mt, d0[p], d1[p], rs[p], on_st, vs[p])
+                    v[p] = vn
+                    vt[p] = vtn
+                    xm[p] += h * vn
+                    xt[p] += h * vtn
+                    if wind:
+                        ei[p] += h * (xrj - xfb)
+                    if wind_x[p]:
+                        xw[p] += h * vn
+                    continue
+                vn = _friction_step(v[p], u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
+                acc = (vn - v[p]) / h
+                v[p] = vn
+                xm[p] += h * vn
                 if wind:
-                    ei += h * (xrj - xfb)
-                if wind_x:
-                    xw += h * v
-                continue
-            # one mass: friction with a stick phase (eq. 3.2; Stribeck curve when enabled)
-            vn = _friction_step(v, u, h, 1.0, d0, d1, rs, on_st, vs)
-            acc = (vn - v) / h
-            v = vn
-            xm += h * v
-            if wind:
-                ei += h * (xrj - xfb)
-            if wind_x:
-                xw += h * v
-            if on_bl:
-                if xm - xt > half:
-                    xt = xm - half
-                elif xm - xt < -half:
-                    xt = xm + half
-            if on_rs:
-                qdd = -2.0 * zr * wr * qd - wr * wr * q - kr * acc
-                qd += h * qdd
-                q += h * qd
-    # dead time on the recorded position (capture/transport), fractional, inside segments
-    if on_td and not td_loop and tau > 0.0:
-        sh = tau / Ts
-        ip = int(sh)
-        fr = sh - ip
-        res = out.copy()
-        s0 = 0
-        for k in range(n):
-            if starts[k]:
-                s0 = k
-            i0 = k - ip
-            i1 = k - ip - 1
-            if i0 < s0:
-                i0 = s0
-            if i1 < s0:
-                i1 = s0
-            res[k] = (1.0 - fr) * out[i0] + fr * out[i1]
-        for k in range(n):
-            out[k] = res[k]
+                    ei[p] += h * (xrj - xfb)
+                if wind_x[p]:
+                    xw[p] += h * vn
+                if on_bl:
+                    if xm[p] - xt[p] > half[p]:
+                        xt[p] = xm[p] - half[p]
+                    elif xm[p] - xt[p] < -half[p]:
+                        xt[p] = xm[p] + half[p]
+                if on_rs:
+                    qdd = -2.0 * zr[p] * wr[p] * qd[p] - wr[p] * wr[p] * q[p] - kr[p] * acc
+                    qd[p] += h * qdd
+                    q[p] += h * qd[p]
+    if on_td and not td_loop:
+        for p in range(P):
+            if tau[p] > 0.0:
+                _delay_output(OUT[p], starts, tau[p], Ts)
 
 
 def simulate_augmented(
@@ -590,28 +626,79 @@ def simulate_augmented(
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:
         nsub = model_substeps(th, Ts, fl, e, md)
-    out = np.empty(n)
-    out_u = np.empty(n) if u_out is None else u_out
-    if warm is None:  # no warm restart: the velocity and acceleration are never read
-        unused = np.zeros(n)
-        warm_args = (np.zeros(n, dtype=np.bool_), unused, unused)
-    else:
-        warm_args = (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
-                     np.ascontiguousarray(warm[2], dtype=float))
-    _kernel(
+    out = np.empty((1, n))
+    out_u = np.empty((1, n))
+    _kernel_many(
         x_r,
         np.ascontiguousarray(derivs[0], dtype=float),
         np.ascontiguousarray(derivs[1], dtype=float),
         np.ascontiguousarray(x0, dtype=float),
         np.ascontiguousarray(starts, dtype=np.bool_),
-        *warm_args,
+        *_warm_arrays(warm, n),
         float(Ts),
         int(nsub),
-        th,
+        th.reshape(1, 8),
         fl,
-        e,
+        e.reshape(1, N_EP),
         md,
         out,
         out_u,
     )
+    if u_out is not None:
+        u_out[:] = out_u[0]
+    return out[0]
+
+
+def simulate_augmented_many(
+    x_r: np.ndarray,
+    x0: np.ndarray,
+    Ts: float,
+    thetas: np.ndarray,
+    eps: np.ndarray,
+    *,
+    flags: np.ndarray,
+    modes: np.ndarray,
+    starts: np.ndarray,
+    derivs: tuple[np.ndarray, np.ndarray],
+    nsub: int,
+    warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """:func:`simulate_augmented` of several parameter sets at once, (P, N): row p is bit for bit
+    ``simulate_augmented(..., thetas[p], ep=eps[p], ...)`` with the given ``nsub``.
+
+    For the columns of a finite-difference Jacobian: the same effects, variants and
+    sub-steps, parameters differing (rows of ``thetas`` (P, 8) and ``eps`` (P, 13)).  The
+    sets are simulated in lockstep in one pass (:func:`_kernel_many`), which is faster than
+    one after the other: a single free run waits on its own chain of dependent operations.
+    """
+    x_r = np.ascontiguousarray(x_r, dtype=float)
+    n = x_r.size
+    TH = np.ascontiguousarray(thetas, dtype=float).reshape(-1, 8)
+    E = np.ascontiguousarray(eps, dtype=float).reshape(-1, N_EP)
+    fl = np.ascontiguousarray(flags, dtype=np.int64)
+    md = np.ascontiguousarray(modes, dtype=np.int64)
+    if md.size < N_MODES:
+        md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
+    # the rows simulate_augmented would refuse (a diverged fit step) are NaN
+    ok = np.isfinite(TH).all(axis=1) & np.isfinite(E).all(axis=1) & (E[:, 6] >= 0.0) & (E[:, 6] <= 1.0)
+    y = np.empty((int(np.count_nonzero(ok)), n))
+    if y.shape[0]:
+        _kernel_many(x_r, np.ascontiguousarray(derivs[0], dtype=float), np.ascontiguousarray(derivs[1], dtype=float),
+                     np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(starts, dtype=np.bool_),
+                     *_warm_arrays(warm, n), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]), fl,
+                     np.ascontiguousarray(E[ok]), md, y, np.empty((0, 0)))
+    if ok.all():
+        return y
+    out = np.full((TH.shape[0], n), np.nan)
+    out[ok] = y
     return out
+
+
+def _warm_arrays(warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's (mask, v, a) of warm restarts: none when ``warm`` is None (v, a never read then)."""
+    if warm is None:
+        unused = np.zeros(n)
+        return np.zeros(n, dtype=np.bool_), unused, unused
+    return (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
+            np.ascontiguousarray(warm[2], dtype=float))
