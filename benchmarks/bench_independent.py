@@ -157,6 +157,7 @@ def run_case(spec: dict, cache: str | None = None, config: str = "{}", perturb: 
     out["diagnosis_s"] = d.elapsed_s
     out["fit_identification"] = r.fit_identification.tracking_error_fit_pct
     out["fit_before"], out["fit_after"] = d.fit_before_pct, d.fit_after_pct
+    out["candidates"] = [c.to_dict() for c in d.candidates]  # every candidate's parameters and score (--jsonl)
     key = MAIN_PARAM.get(spec["cls"])
     if key and key in case.truth:
         fitted = next((c.parameters.get(key) for c in d.candidates if c.effect == spec["cls"] and c.accepted), None)

@@ -107,14 +107,15 @@ def _accepted(r: AxisResult) -> dict[str, dict]:
     return out
 
 
-def _effect_words(effect: str, p: dict) -> str:
+def _effect_words(effect: str, p: dict, unresolved: dict | None = None) -> str:
     from ident.diagnosis import EFFECT_MODELS
 
     if effect == "backlash":  # in µm: a machinist's unit for lost motion
         return f"backlash, gap {p['gap_mm'] * 1e3:.3g} µm"
     if effect == "external_force":
         return "an external force at " + ", ".join(f"{a:.2f}–{b:.2f} s" for a, b in p.get("times", []))
-    return EFFECT_MODELS[effect].words(p) if effect in EFFECT_MODELS else effect.replace("_", " ")
+    # a value the recording does not resolve (a damping on its fit's bound) is said to be so
+    return EFFECT_MODELS[effect].words(p, None, unresolved) if effect in EFFECT_MODELS else effect.replace("_", " ")
 
 
 def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHeadline:
@@ -160,7 +161,9 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
                    "resonance, a delay, a cyclic error, saturation, an external force) improves the held-out "
                    "prediction by more than chance")
     else:
-        missing = "; ".join(_effect_words(e, p) for e, p in accepted.items())
+        unresolved = {c.effect: c.unresolved for c in getattr(d, "candidates", []) or []
+                      if c.accepted and getattr(c, "unresolved", None)}
+        missing = "; ".join(_effect_words(e, p, unresolved.get(e)) for e, p in accepted.items())
     action = _action(r, accepted, fig)
     return AxisHeadline(r.axis, ident, held, missing, action, fig)
 

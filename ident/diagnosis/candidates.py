@@ -383,7 +383,7 @@ def scan_motor_fraction(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> 
     f_hat, mu_hat = float(spec.ep[i_f]), float(spec.ep[i_mu])
     look = race_part(chunk, 1.0, cfg)
     best, c_best = spec, sse(spec, look)
-    # a point where the fit leaves the definition of a mode (ζ on its bound) is not the
+    # a point where the fit leaves the definition of a mode (Effect.implausible) is not the
     # mode moved along its ridge: the scan keeps the fit a resonance when it was one
     plausible = not EFFECT_MODELS["resonance"].implausible(spec, chunk, cfg)
 

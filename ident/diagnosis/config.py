@@ -52,16 +52,17 @@ class DiagnosisConfig:
     #: (−log10 p 3152), was called none by it.
     noise_factor: float = 1.0
 
-    # -- what each effect's name means (effects.py, bounds of the fits) ---------------
+    # -- what each effect's name means (Effect.implausible) and the fits' boxes ----------
     #: A backlash gap below this (mm) is below the 1 µm resolution CNC scales and encoders
     #: measure with: not a gap the data can show.
     min_gap_mm: float = 0.001
     #: A breakaway force within this ratio of Coulomb friction is no Stribeck effect at the
     #: scale eq. 3.2 resolves.
     min_static_ratio: float = 1.2
-    #: A resonance is a lightly damped mode: ζ at most this (a better-damped pole pair is a
-    #: filter the base model's poles already stand for).  It bounds the fit, so the search
-    #: cannot buy training cost with a filter and call it a mode.
+    #: A resonance is fitted as a lightly damped mode: ζ at most this (a better-damped pole
+    #: pair is a filter the base model's poles already stand for).  It bounds the fit; a
+    #: fit that ends on it is no refusal — the held-out likelihood ratio judges the mode,
+    #: and its damping is told as not resolved (ident.diagnosis.intervals).
     max_mode_damping: float = 0.15
     #: A position-periodic error must show at least this many whole periods over the travel
     #: recorded: less than one is a position map the data cannot tell from a slow drift.

@@ -20,12 +20,14 @@
    quantile of the parameters it adds (``config.alpha``), it removes at least
    ``config.min_relevant`` of the held-out residual and more than the measurement noise
    (:func:`_above_noise`), and its parameters are the physics its
-   name means (:func:`_plausible`: size bounds, no signature veto); of those that pass, the
+   name means (:func:`_plausible`: definitions, no signature veto, no refusal of a
+   parameter on its fit's bound — that one is told as not resolved); of those that pass, the
    one removing the largest share of the held-out residual wins; greedy forward selection
    then tries a second one on top by the same rule; the accepted model's parameters are
    then estimated by maximum likelihood with a noise variance of each segment's own
    (:func:`~ident.diagnosis.candidates.segment_variance_fit`): a segment the model cannot
-   follow in phase no longer pulls them;
+   follow in phase no longer pulls them, and every accepted parameter gets a 95 %
+   confidence interval (:mod:`ident.diagnosis.intervals`) or a "not resolved" mark;
 5. **describes** the equivalent input disturbance (:mod:`ident.diagnosis.disturbance`) on
    the identification and validation recordings, and names an ``external_force`` when it
    comes in time blocks the motion does not explain;
@@ -50,6 +52,7 @@ from ident.diagnosis.candidates import (base_variants, fit_spec, refit_base, sea
                                         softened_base)
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, TimeDelay, effect_parameters
+from ident.diagnosis.intervals import at_bound, effect_intervals
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
@@ -65,7 +68,9 @@ class Candidate:
 
     fit_before_pct / fit_after_pct : held-out tracking-error fit % (SPEC §5) of the model
     it was added to and of the augmented model; score : the evidence (signature) and the
-    acceptance figures.
+    acceptance figures; intervals : 95 % confidence interval [lo, hi] per parameter of an
+    accepted effect (of the final model, :mod:`ident.diagnosis.intervals`); unresolved :
+    parameter → why the data do not resolve it (on its fit's bound, an interval including 0).
     """
 
     effect: str
@@ -74,11 +79,15 @@ class Candidate:
     fit_after_pct: float
     accepted: bool
     score: dict
+    intervals: dict = field(default_factory=dict)
+    unresolved: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {
             "effect": self.effect,
             "parameters": _jsonable(self.parameters),
+            "parameters_interval95": _jsonable(self.intervals),
+            "unresolved": dict(self.unresolved),
             "fit_before_pct": float(self.fit_before_pct),
             "fit_after_pct": float(self.fit_after_pct),
             "accepted": bool(self.accepted),
@@ -581,8 +590,8 @@ def _validation_where_words(loc: dict, dist: dict | None) -> str:
             f"block{'s' if tb['count'] != 1 else ''} ({100 * tb['time_share']:.0f} % of the time: {when}{more})")
 
 
-def _param_words(effect: str, p: dict) -> str:
-    return EFFECT_MODELS[effect].words(p) if effect in EFFECT_MODELS else effect
+def _param_words(effect: str, p: dict, intervals: dict | None = None, unresolved: dict | None = None) -> str:
+    return EFFECT_MODELS[effect].words(p, intervals, unresolved) if effect in EFFECT_MODELS else effect
 
 
 def diagnose(
@@ -775,7 +784,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         if ok and rank > best_gain:
             best_name, best_gain = eff, rank
         candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
-                                     sigs, [], why, base_sc.raw_rms, ev, Ts=Ts))
+                                     sigs, [], why, base_sc.raw_rms, ev, Ts=Ts, chunk=full, cfg=cfg))
     # 4. greedy forward selection: the best single effect, then a second on top of it
     chosen_first = best_name  # by the forward step, whatever order the verdict names them in
     if best_name is not None:
@@ -813,7 +822,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         for eff, sc, gain, folds_ok, ok, why, ev in round2:
             candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
                                          cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev,
-                                         Ts=Ts))
+                                         Ts=Ts, chunk=full, cfg=cfg))
         if best2 is not None:
             accepted.append(best2)
             current_sc = best2_sc
@@ -860,6 +869,17 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         final = fit_spec(current_sc.specs[0], full, max_iter=10, cfg=cfg)
     else:
         final = base
+    # every accepted parameter with its 95 % interval, or why the data leave it open
+    if accepted:
+        say("confidence intervals of the accepted parameters")
+        # (at the stationary point of the final fit's cost, which the search may stop short of:
+        # the accepted effects' parameters are then those of the final model)
+        final, told = effect_intervals(final, full, cfg, Ts, pool)
+        for j, c in enumerate(candidates):
+            if c.accepted and c.effect in told:
+                iv, unres = told[c.effect]
+                candidates[j] = replace(c, parameters=effect_parameters(final, c.effect, Ts), intervals=iv,
+                                        unresolved=unres)
     x_hat1 = simulate_spec(final, full)
     fit_before = fit_of(base_sc)
     fit_after = fit_of(current_sc)
@@ -1024,7 +1044,8 @@ def _fold_parameters(specs: list[ModelSpec], eff: str, Ts: float) -> dict:
 
 def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gain: float, need: float,
                folds_ok: bool, sigs: dict, added_to: list[str], implausible: str = "",
-               rms_before: float = math.nan, ev: dict | None = None, *, Ts: float) -> Candidate:
+               rms_before: float = math.nan, ev: dict | None = None, *, Ts: float, chunk: Chunk,
+               cfg: DiagnosisConfig) -> Candidate:
     params = _fold_parameters(sc.specs, eff, Ts)
     score = {
         "held_out_residual_reduction": float(gain),
@@ -1039,7 +1060,8 @@ def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gai
     }
     if added_to:
         score["added_to"] = list(added_to)
-    return Candidate(eff, params, float(before), float(after), bool(ok), score)
+    held = {k: why for s in sc.specs for k, why in at_bound(s, eff, chunk, cfg).items()}
+    return Candidate(eff, params, float(before), float(after), bool(ok), score, unresolved=held)
 
 
 def _fit_words(before: float, after: float) -> str:
@@ -1062,7 +1084,17 @@ def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candi
     where = _where_words(loc)
     head = f"Mismatch: {where}."
     if accepted:
-        left = "; ".join(_param_words(e, effect_parameters(final, e, Ts)) for e in accepted)
+        by_name = {c.effect: c for c in cands if c.accepted}
+
+        def one(e: str) -> str:
+            c = by_name.get(e)
+            words = _param_words(e, effect_parameters(final, e, Ts), c.intervals if c else None,
+                                 c.unresolved if c else None)
+            if c is not None:  # the evidence beside the statement
+                words += f", removing {100 * c.score['held_out_residual_reduction']:.0f} % of the held-out residual"
+            return words
+
+        left = "; ".join(one(e) for e in accepted)
         # "reference fit": eq. 3.3 as the diagnosis re-fitted it, not the identified model (ident/headline.py)
         return (f"{head} Left out: {left}. Added to the model: reference fit "
                 f"{_fit_words(before, after)}, {_rms_words(loc['held_out_rms_mm'], loc['held_out_rms_after_mm'])} "

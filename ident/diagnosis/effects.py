@@ -14,8 +14,13 @@ search in :mod:`ident.diagnosis.candidates` never ask which effect they hold:
 - ``parameters(spec)`` / ``set_arrays(p, ep, modes)``: SPEC §7 words ↔ simulator arrays
   (:mod:`ident.diagnosis.augmented`), also used by :class:`ident.axis_model.AxisModel`;
 - ``implausible(spec, chunk)``: why fitted values are not the physics the name means ("" if
-  they are) — part of the effect's definition, never a signature veto;
-- ``words(p)`` and ``signature(loc)``: what the user reads, what the localisation shows.
+  they are) — part of the effect's definition (a gap the scales resolve, a mode below the
+  Nyquist band, a dead time beyond the lag of sampling), never a signature veto and never a
+  parameter on a bound of its fit's box: that parameter is *not resolved*
+  (:mod:`ident.diagnosis.intervals`), which the words say, and the effect is judged by its
+  held-out likelihood ratio all the same;
+- ``words(p, intervals, unresolved)`` and ``signature(loc)``: what the user reads (each
+  value with its 95 % interval or "not resolved"), what the localisation shows.
 """
 
 from __future__ import annotations
@@ -27,7 +32,8 @@ from ident.diagnosis.augmented import MODE_SLOTS, simulate_augmented
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.spec import Chunk, ModelSpec, sse
 
-__all__ = ["Effect", "TimeDelay", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share", "motor_shares"]
+__all__ = ["Effect", "TimeDelay", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share", "motor_shares",
+           "told"]
 
 
 def cascade_motor_share(theta: np.ndarray) -> float:
@@ -111,7 +117,9 @@ class Effect:
         """Why the fitted ``spec`` is not the physics the name means on ``chunk`` ("" if it is)."""
         return ""
 
-    def words(self, p: dict) -> str:
+    def words(self, p: dict, intervals: dict | None = None, unresolved: dict | None = None) -> str:
+        """The effect in the user's words, each value with its 95 % interval (``intervals``:
+        name → [lo, hi]) or why it is not resolved (``unresolved``: name → why)."""
         return self.name
 
     def signature(self, loc: dict) -> dict:
@@ -119,6 +127,20 @@ class Effect:
 
     def variant(self, spec: ModelSpec) -> int:
         return int(spec.modes[MODE_SLOTS[self.name]]) if self.name in MODE_SLOTS else 0
+
+
+def told(p: dict, key: str, fmt: str, unit: str = "", intervals: dict | None = None,
+         unresolved: dict | None = None, scale: float = 1.0) -> str:
+    """``p[key]`` in words with what the data say of it: "0.03 (0.01–0.08)", "0.15 (not
+    resolved: held at the fit's bound 0.15)" or the bare value when no interval is known.
+    ``scale`` multiplies value and interval (s → ms)."""
+    v = f"{scale * p[key]:{fmt}}{unit}"
+    if unresolved and key in unresolved:
+        return f"{v} (not resolved: {unresolved[key]})"
+    if intervals and key in intervals:
+        lo, hi = intervals[key]
+        return f"{v} ({scale * lo:{fmt}}–{scale * hi:{fmt}}{unit})"
+    return v
 
 
 def _concentration(loc: dict, share: str, time_share: str) -> float:
@@ -196,8 +218,8 @@ class Backlash(Effect):
         g = float(spec.ep[0])
         return f"gap below {1e3 * cfg.min_gap_mm:.0f} µm" if g < cfg.min_gap_mm else ""
 
-    def words(self, p):
-        return f"backlash, gap {p['gap_mm']:.3g} mm"
+    def words(self, p, intervals=None, unresolved=None):
+        return f"backlash, gap {told(p, 'gap_mm', '.3g', ' mm', intervals, unresolved)}"
 
     def signature(self, loc):
         return {"after_reversal_30ms_share": loc.get("after_reversal_30ms_share", 0.0),
@@ -232,9 +254,9 @@ class Stribeck(Effect):
         return (f"breakaway within {100 * (cfg.min_static_ratio - 1):.0f} % of Coulomb friction"
                 if r < cfg.min_static_ratio else "")
 
-    def words(self, p):
-        return (f"Stribeck friction, static/Coulomb {p['static_to_coulomb_ratio']:.2g}, "
-                f"Stribeck velocity {p['stribeck_velocity_mm_s']:.2g} mm/s")
+    def words(self, p, intervals=None, unresolved=None):
+        return (f"Stribeck friction, static/Coulomb {told(p, 'static_to_coulomb_ratio', '.2g', '', intervals, unresolved)}, "
+                f"Stribeck velocity {told(p, 'stribeck_velocity_mm_s', '.2g', ' mm/s', intervals, unresolved)}")
 
     def signature(self, loc):
         return {"low_speed_share": loc.get("low_speed_share", 0.0) + loc.get("at_rest_share", 0.0),
@@ -312,22 +334,27 @@ class Resonance(Effect):
             ep[5] = p.get("gain", 1.0)
 
     def implausible(self, spec, chunk, cfg):
-        f, z = float(spec.ep[3]), float(spec.ep[4])
-        # ζ on its bound: the fit wanted a better-damped pole pair (a filter), not a mode
-        if z >= (1.0 - 1e-3) * cfg.max_mode_damping or f > 0.45 / chunk.Ts:
-            return f"not a lightly damped mode (ζ = {z:.2f}, {f:.0f} Hz)"
-        return ""
+        # a mode the sampling shows lies below the Nyquist band.  A damping on its bound
+        # (config.max_mode_damping) is not a refusal: the data want a better-damped pole pair
+        # than the box allows, and the damping is told as not resolved
+        f = float(spec.ep[3])
+        return f"mode at {f:.0f} Hz, beyond 0.45/Ts" if f > 0.45 / chunk.Ts else ""
 
     def finish(self, spec, chunk, cfg):
         from ident.diagnosis.candidates import scan_motor_fraction
 
         return scan_motor_fraction(spec, chunk, cfg)
 
-    def words(self, p):
+    def words(self, p, intervals=None, unresolved=None):
+        damping = ("damping not resolved (" + unresolved["damping"] + ")" if unresolved and "damping" in unresolved
+                   else f"damping {told(p, 'damping', '.3f', '', intervals, unresolved)}")
+        # a mode whose damping the data leave open is still an oscillation at that frequency
+        what = "an oscillatory mode" if unresolved and "damping" in unresolved else "resonance"
         if "locked_motor_hz" in p:
-            return (f"resonance at {p['freq_hz']:.1f} Hz (free two-mass mode; the table rings at "
-                    f"{p['locked_motor_hz']:.1f} Hz with the motor held), damping {p['damping']:.3f}")
-        return f"resonance at {p['freq_hz']:.1f} Hz, damping {p['damping']:.3f}"
+            return (f"{what} at {told(p, 'freq_hz', '.1f', ' Hz', intervals, unresolved)} (free two-mass mode; the "
+                    f"table rings at {told(p, 'locked_motor_hz', '.1f', ' Hz', intervals, unresolved)} with the "
+                    f"motor held), {damping}")
+        return f"{what} at {told(p, 'freq_hz', '.1f', ' Hz', intervals, unresolved)}, {damping}"
 
     def signature(self, loc):
         peaks = loc.get("spectrum_peaks", [])
@@ -428,8 +455,8 @@ class TimeDelay(Effect):
     def implausible(self, spec, chunk, cfg):
         return "delay within one sample period, the lag of sampling" if self.within_inherent_lag(spec, chunk.Ts) else ""
 
-    def words(self, p):
-        words = f"time delay {1e3 * p['delay_s']:.2f} ms ({p['where']}"
+    def words(self, p, intervals=None, unresolved=None):
+        words = f"time delay {told(p, 'delay_s', '.2f', ' ms', intervals, unresolved, 1e3)} ({p['where']}"
         lag = p.get("sampling_lag_s", 0.0)
         if lag:
             words += (f"; the continuous-loop model delays by {1e3 * (p['delay_s'] + lag):.2f} ms, the "
@@ -502,8 +529,9 @@ class CyclicError(Effect):
             return f"period {period:.3g} mm longer than the {travel:.3g} mm travel recorded"
         return ""
 
-    def words(self, p):
-        return f"cyclic error, period {p['period_mm']:.3g} mm, amplitude {p['amplitude']:.3g} {p['amplitude_unit']}"
+    def words(self, p, intervals=None, unresolved=None):
+        return (f"cyclic error, period {told(p, 'period_mm', '.3g', ' mm', intervals, unresolved)}, amplitude "
+                f"{told(p, 'amplitude', '.3g', ' ' + p['amplitude_unit'], intervals, unresolved)}")
 
     def signature(self, loc):
         per = loc.get("position_periodic", {})
@@ -543,9 +571,9 @@ class Saturation(Effect):
         ep[12] = p.get("position_motor_share", ep[12])
         modes[5] = 0 if p.get("anti_windup", True) else 1
 
-    def words(self, p):
-        return f"saturation, limit {p['limit']:.4g} mm/s²" + ("" if p.get("anti_windup", True) else
-                                                            ", integral winding up while clipped")
+    def words(self, p, intervals=None, unresolved=None):
+        return (f"saturation, limit {told(p, 'limit', '.4g', ' mm/s²', intervals, unresolved)}"
+                + ("" if p.get("anti_windup", True) else ", integral winding up while clipped"))
 
     def signature(self, loc):
         return {"high_acceleration_share": loc.get("high_acceleration_share", 0.0),

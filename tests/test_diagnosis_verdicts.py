@@ -1,0 +1,101 @@
+"""A verdict is a statement with its evidence: the held-out likelihood ratio decides, a
+parameter on a bound of its fit is told as not resolved (never a refusal), and every
+accepted parameter comes with a 95 % confidence interval.
+
+Recordings are simulated with the diagnosis's own augmented model (so the truth is a model
+the diagnosis can hold) on a random point-to-point command, with white encoder noise.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from ident.diagnosis import diagnose
+from ident.diagnosis.augmented import EP_INDEX, N_EP, N_MODES, segment_starts, simulate_augmented
+from ident.diagnosis.config import DEFAULT
+from ident.diagnosis.effects import EFFECT_MODELS
+from ident.diagnosis.intervals import at_bound
+from ident.diagnosis.spec import ModelSpec, make_chunk
+from test_diagnosis_units import MODEL, THETA, Ts, point_to_point
+
+NOISE_MM = 5e-4
+
+
+def _mode_recording(seed: int, freq_hz: float | None, damping: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+    """3 s of the P-PI drive of Table 3.3 as a digital drive (the sampled controller, causal
+    feed-forward) with (or without: ``freq_hz`` None) a mode on the recorded position
+    (output filter), plus 0.5 µm of white encoder noise."""
+    x_r = point_to_point(seed)
+    ep = np.zeros(N_EP)
+    flags = np.zeros(6, dtype=np.int64)
+    if freq_hz is not None:
+        ep[EP_INDEX["freq_hz"]], ep[EP_INDEX["damping"]], ep[EP_INDEX["gain"]] = freq_hz, damping, 1.0
+        flags[2] = 1
+    modes = np.zeros(N_MODES, dtype=np.int64)
+    modes[4] = 2
+    x = simulate_augmented(x_r, x_r, Ts, THETA, flags=flags, ep=ep, modes=modes)
+    return x_r, x + NOISE_MM * np.random.default_rng(seed).standard_normal(x_r.size)
+
+
+def _diagnose(freq_hz: float | None, damping: float = 0.03):
+    x_r, x = _mode_recording(41, freq_hz, damping)
+    v_r, v = _mode_recording(42, freq_hz, damping)
+    return diagnose(x_r, x, Ts, MODEL, validation=(v_r, v, None), effects=("resonance",))
+
+
+def test_a_damping_on_the_bound_of_its_fit_is_not_resolved_and_no_refusal():
+    res = EFFECT_MODELS["resonance"]
+    spec = ModelSpec(THETA.copy(), ("resonance",))
+    spec.modes[3] = 2
+    spec.ep[EP_INDEX["motor_fraction"]] = 0.7
+    chunk = make_chunk(np.linspace(0, 1, 300), np.linspace(0, 1, 300), Ts, segment_starts(300, None))
+    spec.ep[EP_INDEX["freq_hz"]], spec.ep[EP_INDEX["damping"]] = 40.0, DEFAULT.max_mode_damping
+    assert res.implausible(spec, chunk, DEFAULT) == ""
+    assert "damping" in at_bound(spec, "resonance", chunk, DEFAULT)
+    spec.ep[EP_INDEX["damping"]] = 0.03
+    assert at_bound(spec, "resonance", chunk, DEFAULT) == {}
+    # a mode beyond the Nyquist band is no mode the sampling shows: that stays a definition
+    spec.ep[EP_INDEX["freq_hz"]] = 600.0
+    assert res.implausible(spec, chunk, DEFAULT) != ""
+
+
+def test_an_accepted_mode_has_95_percent_intervals_that_hold_the_truth():
+    d = _diagnose(40.0, 0.03)
+    assert d.verdict == "resonance", d.summary
+    c = next(c for c in d.candidates if c.accepted)
+    lo, hi = c.intervals["freq_hz"]
+    assert lo <= 40.0 <= hi and hi - lo < 2.0
+    lo, hi = c.intervals["damping"]
+    assert lo <= 0.03 <= hi and hi - lo < 0.02
+    assert c.unresolved == {}
+    js = json.loads(json.dumps(d.to_dict()))
+    cand = next(c for c in js["candidates"] if c["accepted"])
+    assert set(cand["parameters_interval95"]) >= {"freq_hz", "damping"}
+    # the words give each value with its interval and the share of the residual it removes
+    assert "resonance at 40.0 Hz (" in d.summary and "damping 0.030 (" in d.summary, d.summary
+    assert "of the held-out residual" in d.summary
+
+
+def test_a_better_damped_mode_passes_the_likelihood_test_and_its_damping_is_told_not_resolved():
+    # ζ 0.4 lies beyond the box of a lightly damped mode (0.15): the fit ends on the bound,
+    # the mode still removes most of the held-out residual, and that is what is said
+    d = _diagnose(40.0, 0.4)
+    assert d.verdict == "resonance", d.summary
+    c = next(c for c in d.candidates if c.accepted)
+    assert c.score["significant"]
+    assert c.parameters["damping"] == pytest.approx(DEFAULT.max_mode_damping)
+    assert "damping" in c.unresolved and "damping" not in c.intervals
+    assert "freq_hz" in c.intervals
+    assert "damping not resolved" in d.summary and "oscillatory mode" in d.summary
+
+
+def test_a_clean_drive_gives_none_whatever_bound_its_trial_mode_ends_on():
+    d = _diagnose(None)
+    assert d.verdict == "none", d.summary
+    c = next(c for c in d.candidates if c.effect == "resonance")
+    # refused by the held-out evidence itself (likelihood ratio, or too small a share)
+    assert not c.accepted
+    assert not (c.score["significant"] and c.score["held_out_residual_reduction"] >= DEFAULT.min_relevant)
