@@ -26,13 +26,10 @@ CASES = json.loads((FIX / "cases.json").read_text()) if (FIX / "cases.json").exi
 # docs/diagnosis.md, "Known misses"); kept as strict xfails so a fix shows up at once.
 # Resonance since the one general search replaced the restarts tuned to single seeds
 # (velocity-gain restarts, every-start backlash fits, the preference for a mode at the
-# spectrum peak): the mode is fitted at 300 Hz instead of 100 Hz.  Backlash was a known miss
-# for the same reason until stop 32 (stop 31: gap fitted at 0.0017 mm, time_delay named);
-# since the rounding-level changes of stop 32 the gap is fitted at 0.027 of 0.05 mm
-# (motor share 0.98, at its bound) and named: a fragile fit that the last digits move.
-# With the fits' linear algebra in a fixed order (ident.fixed_order: the same on every
-# machine) the last digits moved once more and it is a miss again, a dead time of 2.4 ms
-# named in its place: now on every machine alike, so a strict xfail holds everywhere.
+# spectrum peak): the mode is fitted at 300 Hz instead of 100 Hz.  Backlash: the gap fit is
+# fragile (the training cost prefers a smaller gap with the motor share at its bound) and
+# with the fits' linear algebra in a fixed order (ident.fixed_order) a 2.4 ms dead time is
+# named in its place, on every machine alike, so a strict xfail holds everywhere.
 KNOWN_MISSES: set[str] = {"resonance", "backlash"}
 
 

@@ -720,7 +720,7 @@ def test_a_backlash_gap_started_off_by_half_moves_to_the_true_gap(x_r, start_gap
     assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.06, rel=0.05)
     # the fit stops in the ripple short of the floor: from 0.03 mm at 1.2 % of the start's
     # cost with the contact's 7 sub-steps (0.4 % with 16; 3.1 % with 4, the step that lost
-    # the drivers/sim battery's gap precision, docs/diagnosis.md stop 34)
+    # the battery's gap precision)
     assert sse(fitted, chunk) < 0.02 * sse(start, chunk)
 
 

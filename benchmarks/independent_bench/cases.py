@@ -41,7 +41,7 @@ Effect ranges (:data:`RANGES`):
   the velocity difference and the filter are counted: five of the six P-PI cases of the
   tuning seeds that were not named a dead time sat at their amplifier's force limit in
   54-62 % of the samples, unstable drives in a limit cycle, not drives with a dead time;
-  replaced at stop 35, after the report seeds had been run on version 1.)
+  replaced by version 2 after the report seeds had been run on version 1.)
 - cyclic_error: cogging/force ripple of amplitude u(0.3, 1.0) x m_tot x 2 m/s² and period
   u(2, 10) mm (any closure), or (semi-closed, half of them) a lead-screw pitch error of
   amplitude lu(20, 200) µm and period u(2, 10) mm seen on a table scale.

@@ -281,7 +281,7 @@ def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) ->
     The search's cost weighs each segment by its tracking error (:func:`make_chunk`), as if
     the model's error were alike everywhere.  Where a segment's response is one no model
     of its kind can follow in phase — a full-closed loop's integrator hunting across a gap
-    in the low-speed set, stick-slip in a limit cycle (docs/diagnosis.md, stop 35) — least
+    in the low-speed set, stick-slip in a limit cycle (docs/diagnosis.md, Known limits) — least
     squares shrinks the parameters that make the oscillation (a smaller gap oscillates
     less, wherever its phase), and that bias is set by how much the segment weighs.  The
     Gaussian likelihood with variance σ_seg² per segment weighs each by 1/σ_seg², σ_seg

@@ -33,7 +33,7 @@ class DiagnosisConfig:
     #: also taken on both residuals whitened by the prediction-error filter of an AR model
     #: of the augmented model's residual, order ≤ this (least BIC).  10 samples span the
     #: loop's fast dynamics at 1 kHz; on the one case looked at BIC chose the same order
-    #: with 30 allowed.  0: the slow noise model alone (the rule until stop 31).
+    #: with 30 allowed.  0: the slow noise model alone.
     ar_order_max: int = 10
     #: Of the effects that pass, the first named is the one removing the largest share of
     #: the held-out residual: the evidence says an effect is real, its size which matters
@@ -46,10 +46,10 @@ class DiagnosisConfig:
     per_param: float = 0.01
     #: An effect must explain more than this many times the measurement noise rms
     #: (√(rms_before² − rms_after²) of the held-out residual, diagnose._above_noise): less
-    #: changes the prediction by less than the sensor scatters (SPEC §7 "none").  Until
-    #: stop 33 the whole held-out residual had to exceed 3 × the noise, a veto on any gain:
-    #: drive-zoo-dev case_007's cyclic error, 65 % of a 1.35 µm residual at 0.48 µm noise
-    #: (−log10 p 3152), was called none by it.
+    #: changes the prediction by less than the sensor scatters (SPEC §7 "none").  It is the
+    #: part an effect removes that must exceed the noise, not the whole residual: a rule on the
+    #: whole residual vetoes any gain (drive-zoo-dev case_007's cyclic error, 65 % of a 1.35 µm
+    #: residual at 0.48 µm noise, −log10 p 3152, was called none by it).
     noise_factor: float = 1.0
 
     # -- what each effect's name means (Effect.implausible) and the fits' boxes ----------
@@ -115,10 +115,10 @@ class DiagnosisConfig:
     #: this length.  A ranking needs a number of moves, not a share of a recording.  6 s:
     #: on the independent bench's tuning seeds 52/69 against 51/69 (0/10 false alarms
     #: both) at a median diagnosis of 11.5 s against 25.4 s; drive-zoo-dev 16/21 as
-    #: without it.  4 s, tried at stop 32, lost gaps: tuning seeds' backlash 5 → 3/10 (52/69
+    #: without it.  4 s lost gaps: tuning seeds' backlash 5 → 3/10 (52/69
     #: overall, as with 6 s), report seeds' 5 → 2/10, for a median diagnosis 17 % shorter.
     #: (The first 10 s of every segment instead lost two zoo cases: on a
-    #: one-segment recording the early rounds saw only its beginning — stop 28.)  A
+    #: one-segment recording the early rounds saw only its beginning.)  A
     #: recording shorter than twice this is raced as when 0: windows would save little
     #: there and add restarts (a 6.8 s LinuxCNC capture lost its 20 µm gap to them).
     race_seconds: float = 6.0
@@ -149,13 +149,13 @@ class DiagnosisConfig:
     #: Fit β = b2 − a2 in place of b2 (eq. 3.3's position gains): b2·x_r − a2·x becomes
     #: a2·(x_r − x) + β·x_r, so a step on a2 moves u by a2's share of the tracking error,
     #: not of the position (~100 mm): b2 and a2 nearly cancel and a fit on them crawls
-    #: (stop 32: the base re-fit reaches its minimum in 15 iterations instead of 60).
+    #: (the base re-fit reaches its minimum in 15 iterations instead of 60).
     #: "all": every fit; "searches": the race and polish of an effect's search only, the
-    #: base, reference and final re-fits keeping b2; "none": b2 everywhere.  Stop 33, one
+    #: base, reference and final re-fits keeping b2; "none": b2 everywhere.  One
     #: run each (tuning seeds / drive-zoo-dev / battery, with the noise rule above): none
     #: 52/17/62 (without it), all 54/20/62, searches 56/20/63 — within the rounding band
     #: of each other; "all" is one parametrisation for every fit and takes the 25 s timing
-    #: case 4.8-4.9 s against 5.4 s (docs/diagnosis.md, stop 33).  β's scale is at least
+    #: case 4.8-4.9 s against 5.4 s.  β's scale is at least
     #: 1e-4·a2, the floor of the friction terms: β multiplies x_r as they multiply 1.
     fit_beta: str = "all"
     #: Base re-fit iterations of the reference models (re-fits from every candidate's base).
