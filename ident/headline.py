@@ -125,6 +125,9 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
     ident = (f"the closed-loop drive model of eq. 3.3 (tracking and disturbance transfer functions, Coulomb "
              f"friction {m.d0:.3g} / {m.d1:.3g} mm/s² for positive / negative speed): tracking bandwidth "
              + (f"{bw:.3g} Hz (−3 dB)" if bw else "beyond the Nyquist frequency"))
+    if r.uncertainty is not None and r.uncertainty.is_equivalent:
+        ident += ("; an equivalent model: it reproduces the tracking response the recording excites, not the "
+                  "drive's physical gains (which parameters the data do not determine: see the parameter table)")
     if r.prior_source:  # --model: an earlier identification scored here, not re-identified
         ident = f"nothing new: the model of {r.prior_source} as it was identified, scored on this recording — " + ident
     if r.shift:

@@ -117,12 +117,17 @@ def test_json_carries_intervals_beside_the_spec_keys(pid_drive):
 def test_the_ppi_demo_drive_is_marked_an_equivalent_model():
     """The default demo machine (thesis Table 3.3's P-PI drive): its integrator and friction
     move together without changing the fit, as the thesis found (friction 17x off)."""
+    from ident.headline import axis_headline
+
     rec = virtual_cnc.simulate(gcode_gen.generate(["X"], seed=1), "fadal-ppi", seed=1)
-    u = ident.identify(rec, diagnose=False).axes["X"].uncertainty
+    r = ident.identify(rec, diagnose=False).axes["X"]
+    u = r.uncertainty
     assert {"d0", "d1"} <= set(u.undetermined)
     assert any({"d0", "d1"} <= set(w.components) for w in u.weak_directions)
     assert u.is_equivalent
     assert "Table 3.3" in u.equivalent_text()
+    # and the answer the report leads with says so
+    assert "an equivalent model" in axis_headline(r).identified
 
 
 def test_summary_and_report_show_each_interval_and_mark(pid_drive, tmp_path):
