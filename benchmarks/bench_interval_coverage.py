@@ -22,6 +22,8 @@ estimator does what linear theory can), and the mean half-width.
 from __future__ import annotations
 
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 from scipy.signal import lfilter
@@ -34,16 +36,10 @@ from ident.model import DriveModel
 from ident.simulation import FreeRun, simulate
 from ident.uncertainty import PARAMETER_NAMES, SEARCH_NAMES, output_error_jacobian
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, for benchmarks.*
+from benchmarks.correlated_noise import ar1_noise  # noqa: E402
+
 PID_X = DriveModel(a1=192.65, a2=44356.23, a3=316830.21, b0=0.0, b1=190.10, b2=44356.23, d0=441.0, d1=-302.0)
-
-
-def _ar1(n: int, rho: float, sigma: float, rng: np.random.Generator) -> np.ndarray:
-    e = rng.standard_normal(n) * sigma * math.sqrt(1 - rho * rho)
-    out = np.empty(n)
-    out[0] = rng.standard_normal() * sigma
-    for k in range(1, n):
-        out[k] = rho * out[k - 1] + e[k]
-    return out
 
 
 def _linear_theory_se(xr, x, cmd_rec, rho: float, sigma: float) -> np.ndarray:
@@ -63,7 +59,7 @@ def _coverage(xr, x, cmd_rec, rho: float, truth: dict[str, float]) -> None:
     est, se, cover, half = ({k: [] for k in names} for _ in range(4))
     shifts: dict[int, int] = {}
     for seed in range(300, 320):
-        noise = _ar1(x.size, rho, 0.5e-3, np.random.default_rng(seed))
+        noise = ar1_noise(x.size, rho, 0.5e-3, seed)
         rec = Recording.from_arrays(cmd_rec.t, {"X": xr}, {"X": x + noise}, segment=cmd_rec.segment)
         r = ident.identify(rec, diagnose=False).axes["X"]
         shifts[r.shift] = shifts.get(r.shift, 0) + 1

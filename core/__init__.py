@@ -4,9 +4,11 @@
 * :mod:`core.recording` — :class:`Recording` (the in-memory recording every stage works
   on) and :class:`Sample` (one controller tick as a transport delivers it);
 * :mod:`core.log_format` — the ``rapid-ident/1`` MCAP layout;
-* :mod:`core.reader` / :mod:`core.writer` — the one MCAP/CSV reader and writer pair.
+* :mod:`core.reader` / :mod:`core.writer` — the one MCAP/CSV reader and writer pair;
+* :mod:`core.pid_law` — one period of the servo's position-loop law (compiled), which the
+  virtual CNC and the tuner's sampled loop both run.
 
-It imports only numpy and mcap, so ``drivers``, ``ident``, ``gcode_gen`` and
+It imports only numpy, numba and mcap, so ``drivers``, ``ident``, ``gcode_gen`` and
 ``virtual_cnc`` can all depend on it without depending on each other.
 """
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["normal_products", "sum_squares", "solve"]
+__all__ = ["dot", "normal_products", "sum_squares", "solve"]
 
 #: Independent partial sums per dot product (combined in a fixed order): four keep the
 #: adder's pipeline busy without making the order depend on the machine.
@@ -57,6 +57,11 @@ def _normal(J: np.ndarray, r: np.ndarray):
 def normal_products(J: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``JᵀJ`` and ``Jᵀr`` of the Gauss–Newton normal equations, in a fixed order."""
     return _normal(np.asfortranarray(J, dtype=np.float64), np.ascontiguousarray(r, dtype=np.float64))
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``aᵀb`` of two vectors in a fixed order."""
+    return float(_dot(np.ascontiguousarray(a, dtype=np.float64), np.ascontiguousarray(b, dtype=np.float64)))
 
 
 def sum_squares(r: np.ndarray) -> float:

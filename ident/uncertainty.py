@@ -65,6 +65,7 @@ from typing import Any, Callable
 import numpy as np
 from scipy.special import stdtrit
 
+from ident.gauss_newton import to_stationary_point
 from ident.model import Bounds, DriveModel
 from ident.preprocessing import segment_slices
 
@@ -711,32 +712,21 @@ def stationary_point(simulate: Callable[[DriveModel], np.ndarray], model: DriveM
     the data it is computed from.  The refinement (:mod:`ident.refine`) searches on every
     k-th residual with a coarser friction simulator and stops at a relative decrease of
     1e-6, which can leave the estimate a standard error or so from that point; these
-    steps (each halved up to four times until the cost falls and the poles stay inside
-    ``bounds``) close the gap.  Returns the model with its Jacobian and residual.
+    steps (:func:`ident.gauss_newton.to_stationary_point`: each halved until the cost falls
+    and the poles stay inside ``bounds``) close the gap.  Returns the model with its
+    Jacobian and residual.
     """
-    J, r = output_error_jacobian(simulate, model, x)
-    cost = float(r @ r)
-    v = np.array([getattr(model, k) for k in PARAMETER_NAMES], dtype=float)
-    for _ in range(max_steps):
-        sc = _scales(v)
-        Js = J * sc
-        try:
-            step = -np.linalg.lstsq(Js, r, rcond=1e-12)[0] * sc
-        except np.linalg.LinAlgError:
-            break
-        for _half in range(5):
-            cand = DriveModel(*(v + step))
-            ok = bounds is None or not bounds.check(cand, sample_period)
-            rc = simulate(cand) - x if ok else None
-            if rc is not None and np.all(np.isfinite(rc)) and float(rc @ rc) < cost:
-                break
-            step = 0.5 * step
-        else:
-            break
-        rel = (cost - float(rc @ rc)) / cost
-        v, model = v + step, cand
-        J, r = output_error_jacobian(simulate, model, x)
-        cost = float(r @ r)
-        if rel < 1e-9:
-            break
-    return model, J, r
+    x = np.asarray(x, dtype=float)
+
+    def jacobian(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return output_error_jacobian(simulate, DriveModel(*v), x)
+
+    def residual(v: np.ndarray) -> np.ndarray | None:
+        cand = DriveModel(*v)
+        if bounds is not None and bounds.check(cand, sample_period):
+            return None  # a pole outside the bounds
+        return simulate(cand) - x
+
+    v0 = np.array([getattr(model, k) for k in PARAMETER_NAMES], dtype=float)
+    v, J, r = to_stationary_point(v0, jacobian, residual, scale=_scales, max_steps=max_steps, rel_decrease=1e-9)
+    return (model if v is v0 else DriveModel(*v)), J, r  # v0 itself: no step was taken

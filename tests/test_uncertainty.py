@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,18 +20,10 @@ from ident.model import Bounds
 from ident.simulation import simulate
 from ident.uncertainty import PARAMETER_NAMES, SEARCH_NAMES, block_length
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository: benchmarks' helpers
+from benchmarks.correlated_noise import ar1_noise  # noqa: E402
+
 TS = 1e-3
-
-
-def _ar1(n: int, rho: float, sigma_mm: float, seed: int) -> np.ndarray:
-    """Stationary AR(1) noise of standard deviation ``sigma_mm``: correlated like a closed loop's residual."""
-    rng = np.random.default_rng(seed)
-    e = rng.standard_normal(n) * sigma_mm * math.sqrt(1.0 - rho * rho)
-    out = np.empty(n)
-    out[0] = rng.standard_normal() * sigma_mm
-    for k in range(1, n):
-        out[k] = rho * out[k - 1] + e[k]
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +50,7 @@ def test_intervals_cover_the_true_parameters_of_a_simulated_drive(pid_drive):
     truth = _truth()
     covered = total = 0
     for seed in range(4):  # four noise realisations, 0.5 µm, correlated over ~20 samples
-        u = _identify(cmd, x + _ar1(x.size, 0.9, 0.5e-3, seed)).axes["X"].uncertainty
+        u = _identify(cmd, x + ar1_noise(x.size, 0.9, 0.5e-3, seed)).axes["X"].uncertainty
         assert u is not None
         for name in PARAMETER_NAMES + SEARCH_NAMES:
             iv = u.parameters[name]
@@ -75,7 +69,7 @@ def test_block_length_follows_the_residual_correlation_time():
     white = np.random.default_rng(1).standard_normal((20000, 1))
     L_white, tau_white = block_length(white, 1)
     assert tau_white < 2.0 and L_white <= 10
-    corr = _ar1(20000, 0.9, 1.0, 2)[:, None]  # integrated time (1 + ρ)/(1 − ρ) = 19
+    corr = ar1_noise(20000, 0.9, 1.0, 2)[:, None]  # integrated time (1 + ρ)/(1 − ρ) = 19
     L_corr, tau_corr = block_length(corr, 1)
     assert 12.0 < tau_corr < 30.0
     assert L_corr >= 5 * 12
@@ -84,7 +78,7 @@ def test_block_length_follows_the_residual_correlation_time():
 def test_a_pole_held_by_a_bound_is_marked_at_bound(pid_drive):
     cmd, x = pid_drive
     # the drive's slow real pole is at 1.17 Hz: a 3 Hz lower bound holds it
-    res = _identify(cmd, x + _ar1(x.size, 0.9, 0.5e-3, 0), bounds=Bounds(p_min_hz=3.0))
+    res = _identify(cmd, x + ar1_noise(x.size, 0.9, 0.5e-3, 0), bounds=Bounds(p_min_hz=3.0))
     r = res.axes["X"]
     u = r.uncertainty
     p = u.parameters["p_hz"]
@@ -99,7 +93,7 @@ def test_a_pole_held_by_a_bound_is_marked_at_bound(pid_drive):
 
 def test_json_carries_intervals_beside_the_spec_keys(pid_drive):
     cmd, x = pid_drive
-    doc = json.loads(_identify(cmd, x + _ar1(x.size, 0.9, 0.5e-3, 1)).to_json())["axes"]["X"]
+    doc = json.loads(_identify(cmd, x + ar1_noise(x.size, 0.9, 0.5e-3, 1)).to_json())["axes"]["X"]
     assert set(doc["model"]) == set(PARAMETER_NAMES)
     assert all(isinstance(v, float) for v in doc["model"].values())
     for name, (lo, hi) in doc["model_interval95"].items():
@@ -139,7 +133,7 @@ def test_summary_and_report_show_each_interval_and_mark(pid_drive, tmp_path):
     from core.writer import write_recording_mcap
 
     cmd, x = pid_drive
-    log = write_recording_mcap(Recording.from_arrays(cmd.t, {"X": cmd.x}, {"X": x + _ar1(x.size, 0.9, 0.5e-3, 2)}),
+    log = write_recording_mcap(Recording.from_arrays(cmd.t, {"X": cmd.x}, {"X": x + ar1_noise(x.size, 0.9, 0.5e-3, 2)}),
                                tmp_path / "pid.mcap")
     proc = subprocess.run([sys.executable, "-m", "agent.cli", "identify", str(log), "--no-diagnose",
                            "--p-min-hz", "3", "--report", str(tmp_path / "r.html")],
@@ -164,7 +158,7 @@ def test_a_critically_damped_pair_gets_a_finite_interval():
     a1, a2, a3 = p + 2 * wn, wn * wn + 2 * p * wn, p * wn * wn
     truth = DriveModel(a1=a1, a2=a2, a3=a3, b0=0.0, b1=a1, b2=a2, d0=441.0, d1=-302.0)
     cmd = point_to_point(20.0, TS, seed=3)
-    x = simulate(truth, cmd.x, TS) + _ar1(cmd.x.size, 0.9, 0.5e-3, 5)
+    x = simulate(truth, cmd.x, TS) + ar1_noise(cmd.x.size, 0.9, 0.5e-3, 5)
     u = _identify(cmd, x).axes["X"].uncertainty
     fast = [pole for pole in u.poles if pole.freq_hz > 10.0]
     assert len(fast) == 2

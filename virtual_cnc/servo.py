@@ -49,6 +49,7 @@ import numpy as np
 from numba import njit
 
 from core.errors import InputError
+from core.pid_law import position_law
 from virtual_cnc.drive import AxisDrive
 from virtual_cnc.effects import (
     Backlash,
@@ -305,28 +306,9 @@ def _servo_loop(xr, noise_t, noise_m, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, u_max, 
         else:
             xrd = (xr[kk + 1] - xr[kk - 1]) / (2.0 * Ts)
             xrdd = (xr[kk + 1] - 2.0 * xr[kk] + xr[kk - 1]) / (Ts * Ts)
-        # 2. control law
+        # 2. control law, 3. actuator limit with anti-windup (conditional integration), DAC
         e = xr[kk] - meas_t
-        if ppi:
-            ev = Kp * (e + Kv * xrd + Ka * xrdd) - vel_fb
-            integrand = ev
-            integ_new = integ + Ts * ev
-            u = Kd * ev + Ki * integ_new
-        else:
-            integrand = e
-            integ_new = integ + Ts * e
-            u = Kp * e + Ki * integ_new + Kd * (xrd - vel_fb) + Kv * xrd + Ka * xrdd
-        # 3. actuator limit with anti-windup (conditional integration), DAC
-        if u > u_max:
-            u = u_max
-            if integrand <= 0.0:
-                integ = integ_new
-        elif u < -u_max:
-            u = -u_max
-            if integrand >= 0.0:
-                integ = integ_new
-        else:
-            integ = integ_new
+        u, integ = position_law(ppi, e, vel_fb, xrd, xrdd, 0.0, integ, Ts, Kp, Ki, Kd, Kv, Ka, 0.0, u_max)
         u = _quantise(u, dac_res)
         out_u[kk] = u
         out_meas[kk] = rec

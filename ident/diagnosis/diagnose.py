@@ -53,7 +53,7 @@ from ident.diagnosis.candidates import (base_variants, fit_spec, refit_base, sea
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, TimeDelay, effect_parameters
 from ident.diagnosis.intervals import at_bound, effect_intervals
-from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
+from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, simulate_spec, sse
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
 
@@ -723,8 +723,10 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         return [j.result() for j in jobs]
 
     def scored(specs: list[ModelSpec]) -> _Scored:
-        rs = [residual(s, te) for s, (_, te) in zip(specs, folds)]
+        # one simulation of each held-out chunk: the weighted residual (spec.residual) is
+        # its raw residual times the chunk's weights
         raw = [simulate_spec(s, te)[te.score] - te.x[te.score] for s, (_, te) in zip(specs, folds)]
+        rs = [te.w[te.score] * r for r, (_, te) in zip(raw, folds)]
         return _Scored(specs, rs, raw, [sse(s, tr) for s, (tr, _) in zip(specs, folds)])
 
     def fit_of(sc: _Scored) -> float:

@@ -36,6 +36,7 @@ from ident.diagnosis.augmented import EP_INDEX
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS
 from ident.diagnosis.spec import Chunk, ModelSpec, simulate_spec
+from ident.gauss_newton import to_stationary_point
 from ident.uncertainty import _sandwich
 
 __all__ = ["at_bound", "effect_intervals", "stationary_point"]
@@ -111,7 +112,7 @@ class _Columns:
 
 
 def _jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns, pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
-    """J = ∂(w·x̂)/∂(v/scale) on the scored samples (central differences) and r = w·(x̂ − x)."""
+    """J = ∂(w·x̂)/∂v on the scored samples (central differences) and r = w·(x̂ − x)."""
     m = chunk.score
     w = chunk.w[m]
     v0 = c.values(spec)
@@ -126,7 +127,7 @@ def _jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns, pool: Executor | None)
         sims = list(pool.map(lambda a: wsim(*a), jobs)) if pool is not None else [wsim(*a) for a in jobs]
         r = w * (simulate_spec(spec, chunk)[m] - chunk.x[m])
         J = np.column_stack([(sims[2 * k] - sims[2 * k + 1]) / 2.0 for k in range(len(c.cols))])
-        J *= (c.scale / c.steps)[None, :]
+        J /= c.steps[None, :]
     return J, r
 
 
@@ -137,45 +138,27 @@ def stationary_point(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig, pool: 
     The covariance holds at a stationary point of the cost on the data it is computed from;
     the search stops on an iteration count or a relative decrease, which on a curved valley
     (a two-mass mode's ridge of equal f·√μ) can leave the estimate several standard errors
-    from that point.  Each step ``−(JᵀJ)⁻¹Jᵀr`` is clipped to the fit's box and halved up
-    to four times until the cost falls (as :func:`ident.uncertainty.stationary_point` does
-    for the base model).  Returns the model, its Jacobian and residual, the columns and the
+    from that point.  Each step ``−(JᵀJ)⁻¹Jᵀr`` is clipped to the fit's box and halved
+    until the cost falls (:func:`ident.gauss_newton.to_stationary_point`, as
+    :func:`ident.uncertainty.stationary_point` does for the base model).  Returns the model,
+    its Jacobian per unit of each column's scale and residual, the columns and the
     parameters held by a bound (effect → name → why).
     """
     held = {e: at_bound(spec, e, chunk, cfg) for e in spec.effects}
     c = _Columns(spec, held, cfg)
-    J, r = _jacobian(spec, chunk, c, pool)
-    cost = float(r @ r)
     boxes = [(-np.inf, np.inf) if e is None else _box(spec, e, n, chunk, cfg) for e, _, n in c.cols]
     lo, hi = np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes])
-    for _ in range(max_steps):
-        if not (np.all(np.isfinite(J)) and math.isfinite(cost)):
-            break
-        try:
-            dz = -np.linalg.lstsq(J, r, rcond=1e-12)[0]
-        except np.linalg.LinAlgError:
-            break
-        jd = J @ dz
-        if not float(jd @ jd) > _STATIONARY * cost:  # the linearised decrease: already there
-            break
-        step = dz * c.scale
-        v = c.values(spec)
-        for _half in range(5):
-            cand = c.moved(spec, np.clip(v + step, lo, hi))
-            with np.errstate(all="ignore"):
-                rc = chunk.w[chunk.score] * (simulate_spec(cand, chunk)[chunk.score] - chunk.x[chunk.score])
-            c_new = float(rc @ rc)
-            if math.isfinite(c_new) and c_new < cost:
-                break
-            step = 0.5 * step
-        else:
-            break
-        rel = (cost - c_new) / cost
-        spec = cand
-        J, r = _jacobian(spec, chunk, c, pool)
-        cost = float(r @ r)
-        if rel < 1e-6:
-            break
+    m = chunk.score
+
+    def residual(v: np.ndarray) -> np.ndarray:
+        with np.errstate(all="ignore"):
+            return chunk.w[m] * (simulate_spec(c.moved(spec, v), chunk)[m] - chunk.x[m])
+
+    v, J, r = to_stationary_point(c.values(spec), lambda v: _jacobian(c.moved(spec, v), chunk, c, pool), residual,
+                                  scale=lambda _v: c.scale, project=lambda v: np.clip(v, lo, hi),
+                                  max_steps=max_steps, rel_decrease=1e-6, min_linear_decrease=_STATIONARY)
+    spec = c.moved(spec, v)
+    J = J * c.scale[None, :]  # per unit of each parameter's scale, as the covariance is formed
     return spec, J, r, c, held
 
 

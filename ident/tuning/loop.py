@@ -13,8 +13,9 @@ Per servo tick k (the laws of thesis Fig. 3.2, e = x_r − x, v the feedback vel
 * PID (``pid``):   u = Kp·e + Ki·Ts·Σe + Kd·(ẋ_r − v) + Kf0·x_r + Kv·ẋ_r + Ka·ẍ_r
   (LinuxCNC pid: Kp = P, Ki = I, Kd = D, Kf0 = FF0, Kv = FF1, Ka = FF2);
 
-u clipped to ±u_max (integration stops while clipped), applied after ``delay`` whole
-periods and held.  Plant, per unit inertia (thesis §3.2, eq. 3.2), x in mm::
+u clipped to ±u_max (integration stops while clipped; the law and its anti-windup are
+:func:`core.pid_law.position_law`, shared with the virtual CNC's servo), applied after
+``delay`` whole periods and held.  Plant, per unit inertia (thesis §3.2, eq. 3.2), x in mm::
 
     ẍ = kj·(u − d(ẋ)) − bj·ẋ,   d = d⁺ moving +, d⁻ moving −, stick while d⁻ ≤ u ≤ d⁺
 
@@ -28,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+
+from core.pid_law import position_law
 
 __all__ = ["Timing", "simulate_loop"]
 
@@ -81,25 +84,7 @@ def _loop(xr, Ts, nsub, ppi, Kp, Ki, Kd, Kv, Ka, Kf0, u_max, kj, bj, dp, dm, cen
             e = xr[k - 1] - x
         else:
             e = xr[k] - x
-        if ppi:
-            ev = Kp * (e + Kv * xrd + Ka * xrdd) - vel
-            w = ev
-            i_new = integ + Ts * ev
-            u = Kd * ev + Ki * i_new
-        else:
-            w = e
-            i_new = integ + Ts * e
-            u = Kp * e + Ki * i_new + Kd * (xrd - vel) + Kf0 * xr[k] + Kv * xrd + Ka * xrdd
-        if u > u_max:
-            u = u_max
-            if w <= 0.0:
-                integ = i_new
-        elif u < -u_max:
-            u = -u_max
-            if w >= 0.0:
-                integ = i_new
-        else:
-            integ = i_new
+        u, integ = position_law(ppi, e, vel, xrd, xrdd, xr[k], integ, Ts, Kp, Ki, Kd, Kv, Ka, Kf0, u_max)
         out_x[k] = x
         out_u[k] = u
         for j in range(delay):
