@@ -39,7 +39,7 @@ __all__ = ["fit_plant", "FIT_MIN_PCT"]
 
 #: Below this tracking-error fit % the recording is not one of this controller with these
 #: gains (or has physics the rigid plant lacks): the fit is refused rather than used.
-FIT_MIN_PCT = 80.0
+FIT_MIN_PCT = 90.0
 
 #: A step of the clock longer than this many periods is a gap: the loop restarts from rest.
 GAP_PERIODS = 1.5
@@ -61,12 +61,13 @@ def fit_plant(recording: Recording, axis: str, gains: Gains, start: Plant, Ts: f
     period, does not move the axis both ways, or the fitted loop reproduces it to less than
     :data:`FIT_MIN_PCT` %.
     """
-    name = str(recording.metadata.get("source") or "the recording")
+    source = recording.metadata.get("source")
+    name = f"recording {source}" if source else "the recording"
     if axis not in recording.axes:
-        raise InputError.about("recording", f"recording {name}: no axis {axis} (it has "
+        raise InputError.about("recording", f"{name}: no axis {axis} (it has "
                                             f"{', '.join(recording.axis_names)})")
     if not np.isclose(recording.sample_period, Ts, rtol=1e-6):
-        raise InputError.about("recording", f"recording {name}: sample period {recording.sample_period * 1e3:.4g} ms, "
+        raise InputError.about("recording", f"{name}: sample period {recording.sample_period * 1e3:.4g} ms, "
                                             f"the identified model's {Ts * 1e3:.4g} ms: not the recording it was "
                                             f"identified from")
     trace = recording.axes[axis]
@@ -74,7 +75,7 @@ def fit_plant(recording: Recording, axis: str, gains: Gains, start: Plant, Ts: f
     step = np.diff(x_r)
     for sign, word, what in ((1, "+", "d⁺"), (-1, "−", "d⁻")):
         if not np.any(sign * step > 0):
-            raise InputError.about("recording", f"recording {name}: axis {axis} is never commanded in the {word} "
+            raise InputError.about("recording", f"{name}: axis {axis} is never commanded in the {word} "
                                                 f"direction: its Coulomb friction {what} cannot be fitted")
     gaps = np.flatnonzero(np.diff(recording.t) > GAP_PERIODS * Ts) + 1
     bounds = np.r_[0, gaps, x_r.size]
@@ -96,7 +97,7 @@ def fit_plant(recording: Recording, axis: str, gains: Gains, start: Plant, Ts: f
     r = resid(z) * norm
     fit = 100.0 * (1.0 - float(np.linalg.norm(r)) / (norm * math.sqrt(r.size)))
     if not fit >= FIT_MIN_PCT:
-        raise InputError.about("recording", f"recording {name}: the {gains.form} loop with the fitted plant reproduces "
+        raise InputError.about("recording", f"{name}: the {gains.form} loop with the fitted plant reproduces "
                                             f"axis {axis}'s tracking error to {fit:.1f} % (< {FIT_MIN_PCT:.0f} %): "
                                             f"are these the gains it ran with?")
     return Plant(math.exp(z[0]), float(z[1]), float(z[2]), float(z[3]), start.gap_mm, start.delay_s, integration,
