@@ -200,7 +200,7 @@ Kd = 0.10
 
 @pytest.mark.slow
 def test_cli_tunes_a_detuned_mismatched_machine(tmp_path):
-    """generate → simulate (TOML machine) → identify → tune → the tuned TOML run on the virtual CNC."""
+    """generate → simulate (TOML machine) → identify → tune --recording → the tuned TOML run on the virtual CNC."""
     def agent(*args: str) -> str:
         p = subprocess.run([sys.executable, "-m", "agent.cli", *args], capture_output=True, text=True, timeout=600,
                            cwd=tmp_path)
@@ -212,10 +212,11 @@ def test_cli_tunes_a_detuned_mismatched_machine(tmp_path):
     agent("simulate", "prog/ident_low.nc", "prog/ident_high.nc", "--machine", "detuned.toml", "--seed", "3",
           "-o", "run.mcap")
     agent("identify", "run.mcap", "--json", "result.json", "--no-diagnose")
-    out = agent("tune", "--machine", "result.json", "--controller", "pid", "--ballbar", "--radius", str(RADIUS),
-                "--feed", str(FEED), "--gain", "X.Kp=44.356", "--gain", "X.Ki=316.83", "--gain", "X.Kd=0.1901",
+    out = agent("tune", "--machine", "result.json", "--recording", "run.mcap", "--controller", "pid", "--ballbar",
+                "--radius", str(RADIUS), "--feed", str(FEED), "--gain", "X.Kp=44.356", "--gain", "X.Ki=316.83", "--gain", "X.Kd=0.1901",
                 "--gain", "Y.Kp=20", "--gain", "Y.Ki=60", "--gain", "Y.Kd=0.1", "--json", "tune.json")
     assert out.startswith("predicted circularity: before ")
+    assert "  Y plant fitted to the recording (tracking-error fit " in out
     doc = json.loads((tmp_path / "tune.json").read_text())
     assert set(doc) >= {"gains", "margins", "predicted_before", "predicted_after"}
     tuned = "\n".join(f"[axes.{a}]\n" + "\n".join(f"{k} = {v!r}" for k, v in g["after"].items())
