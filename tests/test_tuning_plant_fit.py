@@ -29,15 +29,17 @@ GAINS = Gains("pid", {"Kp": PID.Kp, "Ki": PID.Ki, "Kd": PID.Kd}, u_max=10.0)
 START = Plant(1000.0, 1.0, 0.1, -0.1)  # a coefficient match far from the truth
 
 
+def _known_machine():
+    m = PRESETS["fadal-pid"]
+    drive = DrivePlant(J=0.0035, B=0.0035 * BJ, K=0.0035 * KJ, d_plus=DP, d_minus=DM)
+    return replace(m, name="known", axes={"X": replace(m.axes["X"], plant=drive)})
+
+
 @pytest.fixture(scope="module")
 def recording():
     """The virtual CNC (RK4 plant, encoder noise and quantisation, DAC) with the known drive
     under fadal-pid's X controller, on a short identification program."""
-    m = PRESETS["fadal-pid"]
-    x = m.axes["X"]
-    drive = DrivePlant(J=0.0035, B=0.0035 * BJ, K=0.0035 * KJ, d_plus=DP, d_minus=DM)
-    machine = replace(m, name="known", axes={"X": replace(x, plant=drive)})
-    return virtual_cnc.simulate(gcode_gen.generate(["X"], seed=5, n_low=40, n_high=30), machine, seed=5)
+    return virtual_cnc.simulate(gcode_gen.generate(["X"], seed=5, n_low=40, n_high=30), _known_machine(), seed=5)
 
 
 def test_a_known_plant_is_recovered_from_its_recording(recording):
@@ -47,6 +49,19 @@ def test_a_known_plant_is_recovered_from_its_recording(recording):
     assert p.bj == pytest.approx(BJ, rel=0.02)
     assert p.d_plus == pytest.approx(DP, rel=0.02)
     assert p.d_minus == pytest.approx(DM, rel=0.02)
+
+
+def test_the_loop_restarts_from_rest_after_a_gap_in_the_clock():
+    """Two captures, each from rest at its own start, joined with 0.5 s of clock missing: the
+    loop is not carried across the gap (it would jump to the second capture's start)."""
+    runs = [virtual_cnc.simulate(gcode_gen.generate(["X"], seed=s, n_low=20, n_high=15, center=(c,)),
+                                 _known_machine(), seed=s) for s, c in ((6, 0.0), (7, 5.0))]
+    t = np.r_[runs[0].t, runs[0].t[-1] + 0.5 + runs[1].t]
+    trace = AxisTrace(*(np.r_[getattr(runs[0].axes["X"], k), getattr(runs[1].axes["X"], k)]
+                        for k in ("commanded", "actual")))
+    p = fit_plant(Recording(t=t, axes={"X": trace}, sample_period=0.001), "X", GAINS, START, 0.001)
+    assert p.fit_pct > 99.0
+    assert p.kj == pytest.approx(KJ, rel=0.01) and p.d_minus == pytest.approx(DM, rel=0.02)
 
 
 def test_the_accepted_effects_carry_over(recording):

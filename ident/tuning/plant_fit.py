@@ -10,7 +10,7 @@ the closed loop of the sampled controller around the rigid plant of thesis §3.2
 to the *recorded* actual positions x by bounded Levenberg–Marquardt
 (:func:`ident.least_squares.bounded_lm`):
 
-    min_θ  Σ_k (x̂_k(θ; x_r) − x_k)² / σ_e²,   σ_e = rms(x_r − x)   (SPEC §5's scale)
+    min_θ  Σ_k (x̂_k(θ; x_r) − x_k)² / σ_e²,   σ_e = std(x_r − x)   (SPEC §5's scale)
 
 started from the coefficient-matching estimate (:func:`ident.tuning.plant.match_coefficients`),
 kj searched as log kj.  The identified eq. 3.3 model is not in the loop: where it is only an
