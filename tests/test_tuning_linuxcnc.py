@@ -78,6 +78,12 @@ def test_tuning_proven_on_linuxcnc(tmp_path):
     assert plant["kj"] == pytest.approx(true_kj, rel=0.10)
     assert plant["bj"] == pytest.approx(true_bj, rel=0.10)
     assert plant["d_plus"] == pytest.approx(true_d, rel=0.10) and plant["d_minus"] == pytest.approx(-true_d, rel=0.10)
+    # fitted to the recording through pid's sampled loop (ident.tuning.plant_fit): the HAL plant itself
+    fitted = derive_plant(model, current, "X", "euler", load_recording(tmp_path / "run.mcap"))
+    print(f"fitted to the recording: {fitted}")
+    assert fitted.derivation == "recording" and fitted.fit_pct > 99.0
+    assert fitted.kj == pytest.approx(true_kj, rel=0.01) and fitted.bj == pytest.approx(true_bj, rel=0.01)
+    assert fitted.d_plus == pytest.approx(true_d, rel=0.01) and fitted.d_minus == pytest.approx(-true_d, rel=0.01)
     before = None
     try:
         assert lx.capture_run(m, [part], tmp_path / "before.mcap").returncode == 0

@@ -26,6 +26,10 @@ def tune(
     axes: Optional[str] = typer.Option(None, "--axes", help="Ballbar plane, two axis letters (default X,Y)."),
     u_max: float = typer.Option(10.0, "--u-max", help="Output limit, V, for p-pi/pid (LinuxCNC: MAX_OUTPUT)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write gains, margins and predictions as JSON."),
+    recording: Optional[Path] = typer.Option(None, "--recording",
+                                             help="The recording the machine was identified from (agent identify "
+                                                  "LOG): fit each plant to it through the controller's sampled loop "
+                                                  "instead of to the identified model."),
     plant_integration: str = typer.Option("continuous", "--plant-integration",
                                           help="continuous (a real drive) | euler (the headless LinuxCNC test "
                                                "machine's HAL plant, one Euler step per servo period)."),
@@ -47,14 +51,16 @@ def tune(
     plane = [a.strip().upper() for a in axes.split(",") if a.strip()] if axes else None
     result, diff = tune_files(machine, controller=controller, ini=ini, gains=gain, propose=propose, programs=program,
                               ballbar=ballbar, radius=radius, feed=feed, axes=plane, u_max=u_max, json_out=json_out,
-                              integration=plant_integration, lead_deg=lead_deg)
+                              integration=plant_integration, lead_deg=lead_deg, recording=recording)
     what = {"circularity_um": "circularity", "contour_error_max_um": "max contour error",
             "tracking_error_max_um": "max tracking error"}[result.test]
     change = 100.0 * (result.predicted_after / result.predicted_before - 1.0) if result.predicted_before else 0.0
     typer.echo(f"predicted {what}: before {result.predicted_before:.2f} µm, after {result.predicted_after:.2f} µm "
                f"({change:+.0f} %)")
     for a, p in result.plants.items():
-        typer.echo(f"  {a} plant: K/J {p.kj:.1f} mm/(V·s²), B/J {p.bj:.2f} 1/s, Coulomb {p.d_plus:+.3f}/{p.d_minus:+.3f} V"
+        how = (f"fitted to the recording (tracking-error fit {p.fit_pct:.1f} %)" if p.derivation == "recording"
+               else "from the identified model")
+        typer.echo(f"  {a} plant {how}: K/J {p.kj:.1f} mm/(V·s²), B/J {p.bj:.2f} 1/s, Coulomb {p.d_plus:+.3f}/{p.d_minus:+.3f} V"
                    + (f", gap {p.gap_mm * 1e3:.1f} µm" if p.gap_mm else ""))
     for a in result.before:
         mb, ma = result.margins_before[a][0], result.margins_after[a][0]

@@ -7,11 +7,13 @@ unified diff the user applies.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Sequence
 
 from agent.outputs import write_json
 from core.errors import InputError
+from core.reader import load_recording
 from ident.tuning import Gains, Criterion, Tuning, tune
 from ident.tuning.controllers import GAIN_NAMES
 from ident.virtual_machine import load_virtual_machine
@@ -44,9 +46,13 @@ def parse_gains(form: str, axes: Sequence[str], assignments: Sequence[str], flag
 def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Sequence[str], propose: Sequence[str],
                programs: Sequence[Path], ballbar: bool, radius: float, feed: float, axes: Sequence[str] | None,
                u_max: float, json_out: Path | None,
-               integration: str = "continuous", lead_deg: float | None = None) -> tuple[Tuning, list[str]]:
+               integration: str = "continuous", lead_deg: float | None = None,
+               recording: Path | None = None) -> tuple[Tuning, list[str]]:
     """Run the tuning; returns it and the INI diff lines (empty without an INI).
 
+    ``recording``: the capture ``machine`` was identified from; the plants are fitted to it.
+    Without it the plants come from the identified models, and a note names the recording
+    the result was identified from when that file is there to be given.
     With an INI the test is planned with its per-axis limits, as LinuxCNC plans it (and as
     ``agent predict --ini`` does); ``lead_deg``: the ballbar as one program with feed-in/out arcs."""
     vm = load_virtual_machine(machine)
@@ -88,7 +94,14 @@ def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Seque
     if propose:
         changes = parse_gains(controller, test.axes, propose, "--propose")
         proposed = {a: Gains(controller, {**current[a].values, **changes[a]}, current[a].u_max) for a in test.axes}
-    result = tune(vm, current, test, proposed, integration)
+    rec = load_recording(recording) if recording is not None else None
+    result = tune(vm, current, test, proposed, integration, rec)
+    if rec is None:
+        source = _named_recording(machine)
+        if source is not None:
+            result = replace(result, notes=result.notes + (
+                f"the plants come from the identified models; --recording {source} fits them to the recording "
+                f"instead (docs/tuning.md)",))
     diff: list[str] = []
     if ini is not None:
         from ident.tuning.ini import ini_diff
@@ -107,3 +120,18 @@ def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Seque
         doc["ini_diff"] = diff
         write_json(json.dumps(doc, indent=2, allow_nan=False), json_out)
     return result, diff
+
+
+def _named_recording(machine: Path) -> str | None:
+    """The recording the result JSON names as its source, when that file exists (as given, or
+    beside the result), else None."""
+    try:
+        source = json.loads(Path(machine).read_text()).get("source")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(source, str) or not source or source.startswith("<"):
+        return None
+    for path in (Path(source), Path(machine).parent / source):
+        if path.is_file():
+            return str(path)
+    return None

@@ -5,7 +5,8 @@ controller (:class:`ident.tuning.controllers.Gains`), the plant
 
     ẍ = kj·(u − d(ẋ)) − bj·ẋ,   d = d⁺ (ẋ > 0), d⁻ (ẋ < 0)        (thesis §3.2, eq. 3.2)
 
-is found in two steps (docs/tuning.md derives both):
+is found in two steps (docs/tuning.md derives both); with the recording the model was
+identified from, step 2 is the output-error fit of :mod:`ident.tuning.plant_fit` instead:
 
 1. **Coefficient matching** (eq. 3.4 for P-PI, eq. 3.5 for PID).  With the gains known,
    the six coefficients a1, a2, a3, b0, b1, b2 are linear in (kj, bj): an over-determined
@@ -29,18 +30,19 @@ The accepted effects carry over as they are: ``backlash.gap_mm`` (the gap) and
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from core.errors import IdentificationError
+from core.recording import Recording
 from ident.axis_model import AxisModel
 from ident.least_squares import bounded_lm
 from ident.tuning.controllers import Gains, coefficient_rows
-from ident.tuning.loop import simulate_loop
+from ident.tuning.loop import Timing, simulate_loop
 
-__all__ = ["Plant", "match_coefficients", "derive_plant", "excitation", "EXCITATION_SEED"]
+__all__ = ["Plant", "match_coefficients", "derive_plant", "excitation", "EXCITATION_SEED", "form_timing", "loop_response"]
 
 #: Seed of the identification program whose predicted response the plant is matched to.
 EXCITATION_SEED = 1
@@ -59,6 +61,11 @@ class Plant:
     integration : how the drive moves between samples: "continuous" (a real drive) or
         "euler" (one semi-implicit Euler step per period: the headless LinuxCNC test
         machine's HAL plant, whose x responds half a period earlier than a continuous one).
+    derivation : how it was found: "recording" (the sampled loop fitted to the recorded
+        actual positions, :mod:`ident.tuning.plant_fit`) or "model response" (matched to the
+        identified model's coefficients and prediction).
+    fit_pct : with "recording", the tracking-error fit % (SPEC §5) of the sampled loop around
+        this plant on that recording; None otherwise.
     """
 
     kj: float
@@ -68,6 +75,8 @@ class Plant:
     gap_mm: float = 0.0
     delay_s: float = 0.0
     integration: str = "continuous"
+    derivation: str = "model response"
+    fit_pct: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -105,21 +114,47 @@ def excitation(axis: str, Ts: float) -> tuple[np.ndarray, np.ndarray]:
     return run.commanded[axis], run.segment
 
 
-def derive_plant(model: AxisModel, gains: Gains, axis: str = "X", integration: str = "continuous") -> Plant:
-    """The plant of one axis (module docstring): coefficient matching, then response matching."""
+def form_timing(gains: Gains, delay_s: float, Ts: float) -> Timing:
+    """The form's sampling with an accepted dead time added as whole periods of delay."""
+    periods = int(round(delay_s / Ts))
+    return replace(gains.timing, delay=gains.timing.delay + periods) if periods else gains.timing
+
+
+def loop_response(x_r: np.ndarray, bounds: np.ndarray, Ts: float, gains: Gains, timing: Timing, kj: float, bj: float,
+                  d_plus: float, d_minus: float, integration: str) -> np.ndarray:
+    """Actual position [mm] of the form's sampled loop around the plant, following ``x_r``
+    piece by piece (``bounds``: the start index of each piece and the end), each from rest."""
+    kind, Kp, Ki, Kd, Kv, Ka = gains.law()
+    out = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        x, _ = simulate_loop(x_r[a:b], Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, Kf0=gains.ff0, kj=kj, bj=bj,
+                             d_plus=d_plus, d_minus=d_minus, u_max=gains.u_max, timing=timing,
+                             integration=integration)
+        out.append(x)
+    return np.concatenate(out)
+
+
+def derive_plant(model: AxisModel, gains: Gains, axis: str = "X", integration: str = "continuous",
+                 recording: Recording | None = None) -> Plant:
+    """The plant of one axis (module docstring).
+
+    Without ``recording``: coefficient matching, then response matching to the identified
+    model.  With the recording the model was identified from: coefficient matching, then
+    the output-error fit of the sampled loop to that recording
+    (:func:`ident.tuning.plant_fit.fit_plant`), which does not go through the model.
+    """
     start = match_coefficients(model, gains)
+    if recording is not None:
+        from ident.tuning.plant_fit import fit_plant  # imports this module
+
+        return fit_plant(recording, axis, gains, start, model.sample_period, integration)
     Ts = model.sample_period
     x_r, segment = excitation(axis, Ts)
     target = model.simulate(x_r, segment=segment)
     starts = np.flatnonzero(np.r_[True, segment[1:] != segment[:-1]])
     bounds = np.r_[starts, segment.size]
-    kind, Kp, Ki, Kd, Kv, Ka = gains.law()
-    delay_periods = int(round(start.delay_s / Ts))
-    timing = gains.timing
-    if delay_periods:
-        from dataclasses import replace
-
-        timing = replace(timing, delay=timing.delay + delay_periods)
+    Kd = gains.law()[3]
+    timing = form_timing(gains, start.delay_s, Ts)
     # the fit metric's scale (SPEC §5): rms of the predicted tracking error
     norm = float(np.sqrt(np.mean((x_r - target) ** 2))) or 1.0
 
@@ -129,19 +164,10 @@ def derive_plant(model: AxisModel, gains: Gains, axis: str = "X", integration: s
     # d1 >= 0: it did not resolve the friction) has the friction fitted with kj and bj.
     fixed = model.model.d0 > 0 > model.model.d1
 
-    def simulate(z: np.ndarray) -> np.ndarray:
-        kj, bj = math.exp(z[0]), z[1]
-        dp, dm = (start.d_plus, start.d_minus) if fixed else (z[2], z[3])
-        out = []
-        for a, b in zip(bounds[:-1], bounds[1:]):
-            x, _ = simulate_loop(x_r[a:b], Ts, kind=kind, Kp=Kp, Ki=Ki, Kd=Kd, Kv=Kv, Ka=Ka, Kf0=gains.ff0, kj=kj, bj=bj,
-                                 d_plus=dp, d_minus=dm, u_max=gains.u_max, timing=timing,
-                                 integration=integration)
-            out.append(x)
-        return np.concatenate(out)
-
     def resid(z: np.ndarray) -> np.ndarray:
-        return (simulate(z) - target) / norm
+        dp, dm = (start.d_plus, start.d_minus) if fixed else (z[2], z[3])
+        x = loop_response(x_r, bounds, Ts, gains, timing, math.exp(z[0]), z[1], dp, dm, integration)
+        return (x - target) / norm
 
     z0 = np.array([math.log(start.kj), start.bj, start.d_plus, start.d_minus])
     dscale = max(abs(start.d_plus), abs(start.d_minus), 0.01)

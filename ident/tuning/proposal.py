@@ -1,6 +1,7 @@
 """``tune``: from an identified machine and its controller to proposed gains (issue 42).
 
-1. per axis, the plant from the identified model and the current gains (:mod:`.plant`);
+1. per axis, the plant from the identified model and the current gains (:mod:`.plant`),
+   fitted to the recording when it is given (:mod:`.plant_fit`);
 2. the current tuning's predicted figure and margins;
 3. the search over matched pole placements (:mod:`.optimise`) scored by the predicted
    figure of the test (:mod:`.figures`), or the user's own proposal (``proposed``), which
@@ -20,6 +21,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from core.errors import InputError
+from core.recording import Recording
 from ident.tuning.controllers import Gains
 from ident.tuning.figures import Criterion, predicted_figure
 from ident.tuning.margins import Margins
@@ -102,11 +104,14 @@ def _lag_ms(gains: Gains, plant: Plant, Ts: float, f_hz: float) -> float:
 
 
 def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
-         proposed: Mapping[str, Gains] | None = None, integration: str = "continuous") -> Tuning:
+         proposed: Mapping[str, Gains] | None = None, integration: str = "continuous",
+         recording: Recording | None = None) -> Tuning:
     """Propose (or check ``proposed``) gains for the axes of ``test`` on ``vm`` (module docstring).
 
     ``integration``: how the drives move between samples (:class:`ident.tuning.plant.Plant`);
-    "euler" only for the headless LinuxCNC test machine.
+    "euler" only for the headless LinuxCNC test machine.  ``recording``: the capture ``vm``
+    was identified from; the plants are then fitted to it (:mod:`.plant_fit`) rather than
+    to the identified models.
 
     Raises TuningRefused (one line) when the proposal violates a margin or nothing keeps them.
     """
@@ -115,7 +120,7 @@ def tune(vm: VirtualMachine, gains: Mapping[str, Gains], test: Criterion,
     missing = [a for a in axes if a not in gains]
     if missing:
         raise InputError.about("controller", f"no controller gains for axis {missing[0]}")
-    plants = {a: derive_plant(vm.axes[a], gains[a], a, integration) for a in axes}
+    plants = {a: derive_plant(vm.axes[a], gains[a], a, integration, recording) for a in axes}
     res = {a: _resonance(vm, a) for a in axes}
     before = {a: gains[a] for a in axes}
     m_before = {a: violations(before[a], plants[a], Ts, res[a])[:2] for a in axes}
