@@ -61,8 +61,8 @@ def _check_value(effect: str, key: str, value: Any) -> None:
         items = [value] if form == "interval" else value
         if not isinstance(items, (list, tuple)) or not all(isinstance(w, (list, tuple)) and len(w) == 2
                                                            for w in items):
-            raise InputError(f"{effect} {key} must be {'[low, high]' if form == 'interval' else 'a list of [start, end]'}"
-                             f", got {value!r}")
+            shape = "[low, high]" if form == "interval" else "a list of [start, end]"
+            raise InputError(f"{effect} {key} must be {shape}, got {value!r}")
         for w in items:
             for v in w:
                 check_effect_parameter(effect, key, v)

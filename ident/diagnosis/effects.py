@@ -135,6 +135,15 @@ class Effect:
     def variant(self, spec: ModelSpec) -> int:
         return int(spec.modes[MODE_SLOTS[self.name]]) if self.name in MODE_SLOTS else 0
 
+    @property
+    def called(self) -> str:
+        """How a sentence names the effect (the registry's words: "time delay")."""
+        return REGISTRY[self.name].words
+
+    def said(self, p: dict, key: str, fmt: str, intervals: dict | None = None, unresolved: dict | None = None) -> str:
+        """:func:`told` with the registry's unit of ``key``."""
+        return told(p, key, fmt, _unit(self.name, key), intervals, unresolved)
+
 
 def _variants(effect: str, key: str) -> tuple:
     """The words of ``effect``'s variant parameter ``key`` by the simulator's mode value (registry order)."""
@@ -238,7 +247,7 @@ class Backlash(Effect):
         return f"gap below {1e3 * cfg.min_gap_mm:.0f} µm" if g < cfg.min_gap_mm else ""
 
     def words(self, p, intervals=None, unresolved=None):
-        return f"{REGISTRY[self.name].words}, gap {told(p, 'gap_mm', '.3g', _unit(self.name, 'gap_mm'), intervals, unresolved)}"
+        return f"{self.called}, gap {self.said(p, 'gap_mm', '.3g', intervals, unresolved)}"
 
     def signature(self, loc):
         return {"after_reversal_30ms_share": loc.get("after_reversal_30ms_share", 0.0),
@@ -274,9 +283,9 @@ class Stribeck(Effect):
                 if r < cfg.min_static_ratio else "")
 
     def words(self, p, intervals=None, unresolved=None):
-        return (f"{REGISTRY[self.name].words}, static/Coulomb {told(p, 'static_to_coulomb_ratio', '.2g', '', intervals, unresolved)}, "
-                f"Stribeck velocity "
-                f"{told(p, 'stribeck_velocity_mm_s', '.2g', _unit(self.name, 'stribeck_velocity_mm_s'), intervals, unresolved)}")
+        ratio = self.said(p, 'static_to_coulomb_ratio', '.2g', intervals, unresolved)
+        return (f"{self.called}, static/Coulomb {ratio}, "
+                f"Stribeck velocity {self.said(p, 'stribeck_velocity_mm_s', '.2g', intervals, unresolved)}")
 
     def signature(self, loc):
         return {"low_speed_share": loc.get("low_speed_share", 0.0) + loc.get("at_rest_share", 0.0),
@@ -378,7 +387,7 @@ class Resonance(Effect):
         damping = ("damping not resolved (" + unresolved["damping"] + ")" if unresolved and "damping" in unresolved
                    else f"damping {told(p, 'damping', '.3f', '', intervals, unresolved)}")
         # a mode whose damping the data leave open is still an oscillation at that frequency
-        what = "an oscillatory mode" if unresolved and "damping" in unresolved else REGISTRY[self.name].words
+        what = "an oscillatory mode" if unresolved and "damping" in unresolved else self.called
         hz = _unit(self.name, "freq_hz")
         if "locked_motor_hz" in p:
             return (f"{what} at {told(p, 'freq_hz', '.1f', hz, intervals, unresolved)} (free two-mass mode; the "
@@ -487,7 +496,7 @@ class TimeDelay(Effect):
 
     def words(self, p, intervals=None, unresolved=None):
         # told in ms, the registry's delay_s (s) scaled for a reader of servo periods
-        words = f"{REGISTRY[self.name].words} {told(p, 'delay_s', '.2f', ' ms', intervals, unresolved, 1e3)} ({p['where']}"
+        words = f"{self.called} {told(p, 'delay_s', '.2f', ' ms', intervals, unresolved, 1e3)} ({p['where']}"
         lag = p.get("sampling_lag_s", 0.0)
         if lag:
             words += (f"; the continuous-loop model delays by {1e3 * (p['delay_s'] + lag):.2f} ms, the "
@@ -562,8 +571,7 @@ class CyclicError(Effect):
         return ""
 
     def words(self, p, intervals=None, unresolved=None):
-        return (f"{REGISTRY[self.name].words}, period "
-                f"{told(p, 'period_mm', '.3g', _unit(self.name, 'period_mm'), intervals, unresolved)}, amplitude "
+        return (f"{self.called}, period {self.said(p, 'period_mm', '.3g', intervals, unresolved)}, amplitude "
                 f"{told(p, 'amplitude', '.3g', ' ' + shown_unit(p['amplitude_unit']), intervals, unresolved)}")
 
     def signature(self, loc):
@@ -608,7 +616,7 @@ class Saturation(Effect):
     def words(self, p, intervals=None, unresolved=None):
         # the limit of the control-equivalent acceleration, not of an amplifier's volts
         return (f"saturation of the control-equivalent acceleration, limit "
-                f"{told(p, 'limit', '.4g', _unit(self.name, 'limit'), intervals, unresolved)}"
+                f"{self.said(p, 'limit', '.4g', intervals, unresolved)}"
                 + ("" if p.get("anti_windup", True) else ", integral winding up while clipped"))
 
     def signature(self, loc):
