@@ -70,12 +70,19 @@ def _check_value(effect: str, key: str, value: Any) -> None:
         check_effect_parameter(effect, key, value)
 
 
-def check_effect_parameters(effect: str, params: Any, *, complete: bool = False) -> None:
+def check_effect_parameters(effect: str, params: Any, *, complete: bool = False, place: str | None = None) -> None:
     """Every parameter of one effect: a mapping of names to values in the registry's forms (numbers,
     and words, flags or intervals where :mod:`core.effects` says so); ``complete``: also the
-    :data:`REQUIRED` ones present."""
+    :data:`REQUIRED` ones present; ``place`` (:data:`core.effects.MODEL` …): only the names
+    the registry gives that place (a model's saturation has a ``limit``, not the virtual
+    CNC's ``limit_v``)."""
     if not isinstance(params, Mapping):
         raise InputError(f"effect {effect}: parameters must be name: value pairs, got {params!r}")
+    if place is not None and effect in EFFECTS:
+        known = EFFECTS[effect].names(place)
+        unknown = [k for k in params if k not in known]
+        if unknown:
+            raise InputError(f"effect {effect}: unknown parameter {unknown[0]!r}; known: {', '.join(known)}")
     missing = [k for k in REQUIRED.get(effect, ()) if complete and k not in params]
     if missing:
         raise InputError(f"effect {effect} has no {missing[0]} (it needs {', '.join(REQUIRED[effect])})")

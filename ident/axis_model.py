@@ -28,7 +28,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from core.effect_limits import check_effect_parameters
-from core.effects import EFFECT_NAMES
+from core.effects import EFFECT_NAMES, MODEL
 from core.errors import InputError
 from ident.model import DriveModel
 
@@ -77,7 +77,7 @@ class AxisModel:
         if not self.sample_period > 0:
             raise InputError(f"sample period must be > 0 s, got {self.sample_period}")
         for name, params in self.effects.items():
-            check_effect_parameters(name, params, complete=True)
+            check_effect_parameters(name, params, complete=True, place=MODEL)
 
     # -- simulation ---------------------------------------------------------------------
     @property

@@ -190,6 +190,15 @@ def test_a_value_out_of_range_is_refused_alike_by_the_simulator_and_the_axis_mod
     assert str(by_sim.value).startswith(f"{name} {key} must be")
 
 
+def test_the_axis_model_refuses_a_virtual_cnc_quantity_by_its_name():
+    """A model clips the control-equivalent acceleration (``limit``, mm/s²); the virtual CNC's
+    amplifier limit in volts (``limit_v``) is another quantity, refused by name, not ignored."""
+    model = AxisModel(DriveModel(*THETA), TS, effects={"saturation": {"limit": 1500.0}})
+    with pytest.raises(InputError, match=r"effect saturation: unknown parameter 'limit_v'; known: limit, "):
+        model.with_parameter("saturation.limit_v", 2.0)
+    assert model.with_parameter("saturation.limit", 1800.0).effects["saturation"]["limit"] == 1800.0
+
+
 @pytest.mark.parametrize("old, new", [
     ("time_delay=delay_s:0.003,at:capture", "time_delay=delay_s:0.003,where:capture"),
     ("saturation=limit:1.5", "saturation=limit_v:1.5"),
