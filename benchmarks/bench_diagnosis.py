@@ -89,9 +89,9 @@ def truth_value(cls: str, truth: dict, machine: str) -> dict[str, float]:
         return {"freq_hz": truth["freq_hz"]}
     if cls == "stribeck":
         return {"static_to_coulomb_ratio": truth["static_to_coulomb_ratio"]}
-    if cls == "saturation":
+    if cls == "saturation":  # the amplifier's limit_v [V] (older cases: "limit") → the model's limit [mm/s²]
         kj = load_machine(machine).axes["X"].plant.K_over_J
-        return {"limit": truth["limit"] * kj}
+        return {"limit": truth.get("limit_v", truth.get("limit")) * kj}
     return {}
 
 

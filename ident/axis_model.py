@@ -6,7 +6,8 @@ fits and report, ``agent identify --against`` and the virtual machine
 
 * the base parameters θ = (a1, a2, a3, b0, b1, b2, d0, d1) of eq. 3.3;
 * the effects of SPEC §7 that the diagnosis accepted, by name, with the parameters in
-  the words of :func:`ident.diagnosis.candidates.effect_parameters` (``gap_mm``, ``delay_s`` …);
+  the words of :func:`ident.diagnosis.candidates.effect_parameters` (``gap_mm``, ``delay_s`` …),
+  names, units and admissible ranges those of the effect registry (:mod:`core.effects`);
 * the controller form the diagnosis fitted (``continuous`` eq. 3.3, ``sampled``: the
   control law evaluated once per sample and held, or ``sampled_causal``: the same with the
   feed-forward differentiating the command as the drive receives it);
@@ -27,15 +28,16 @@ from typing import Any, Mapping
 import numpy as np
 
 from core.effect_limits import check_effect_parameters
+from core.effects import EFFECT_NAMES, MODEL
 from core.errors import InputError
 from ident.model import DriveModel
 
 __all__ = ["AxisModel", "BASE_KEYS", "EFFECT_NAMES", "CONTROLLERS"]
 
 BASE_KEYS = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
-#: SPEC §7 effects an axis model can carry (external_force is described, never simulated),
-#: in the order of the augmented simulator's flag vector.
-EFFECT_NAMES = ("backlash", "stribeck", "resonance", "time_delay", "cyclic_error", "saturation")
+# EFFECT_NAMES (imported above from the effect registry, core.effects, re-exported): the
+# SPEC §7 effects an axis model can carry (external_force is described, never simulated),
+# in the order of the augmented simulator's flag vector.
 #: The control law's forms, in the order of the augmented simulator's controller slot
 #: (``modes[4]``): eq. 3.3 as written, sampled and held, and sampled with the feed-forward
 #: differentiating the command causally.
@@ -75,7 +77,7 @@ class AxisModel:
         if not self.sample_period > 0:
             raise InputError(f"sample period must be > 0 s, got {self.sample_period}")
         for name, params in self.effects.items():
-            check_effect_parameters(name, params, complete=True)
+            check_effect_parameters(name, params, complete=True, place=MODEL)
 
     # -- simulation ---------------------------------------------------------------------
     @property

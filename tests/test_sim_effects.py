@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -69,7 +70,7 @@ def test_capture_delay_shifts_the_recorded_response_by_the_delay():
     x_r = point_to_point([3.0, -2.0])
     axis = axis_of("fadal-pid", ideal_encoder=True)
     plain = simulate_axis_response(x_r, axis)
-    late = simulate_axis_response(x_r, axis, [TimeDelay(delay, at="capture")])
+    late = simulate_axis_response(x_r, axis, [TimeDelay(delay, where="capture")])
     assert np.array_equal(plain.u, late.u)  # the loop itself is untouched
     t = np.arange(x_r.size) * TS
     # the shift that best aligns the two recordings (cross-correlation on a 0.1 ms grid)
@@ -94,7 +95,7 @@ def test_feedback_delay_moves_the_table_on_time_but_reports_it_late():
     x_r = point_to_point([1.0])
     axis = axis_of("fadal-pid", ideal_encoder=True)
     plain = simulate_axis_response(x_r, axis)
-    late = simulate_axis_response(x_r, axis, [TimeDelay(delay, at="feedback")])
+    late = simulate_axis_response(x_r, axis, [TimeDelay(delay, where="feedback")])
     assert onset(late.table, 0.0, 1e-9) == onset(plain.table, 0.0, 1e-9)
     recorded_shift = onset(late.actual, 0.0, 1e-6) - onset(late.table, 0.0, 1e-6)
     assert abs(recorded_shift - delay / TS) <= 1.0
@@ -171,7 +172,7 @@ def test_saturation_limits_the_command_and_grows_the_error_in_the_fastest_accele
     x_r = point_to_point([8.0, -8.0, 2.0])
     axis = axis_of()
     plain = simulate_axis_response(x_r, axis)
-    sat = simulate_axis_response(x_r, axis, [Saturation(limit=limit)])
+    sat = simulate_axis_response(x_r, axis, [Saturation(limit_v=limit)])
     assert np.abs(plain.u).max() > limit  # the unsaturated drive needs more than the limit ...
     assert np.abs(sat.u).max() <= limit  # ... the saturated one never exceeds it
     at_limit = np.abs(sat.u) >= limit - axis.dac_resolution
@@ -193,9 +194,14 @@ def test_saturation_limits_the_command_and_grows_the_error_in_the_fastest_accele
         ("resonance=freq_hz:40,damping:0.05", Resonance(freq_hz=40.0, damping=0.05)),
         ("stribeck=2", Stribeck(static_to_coulomb_ratio=2.0)),
         ("time_delay=0.003", TimeDelay(delay_s=0.003)),
-        ("time_delay=delay_s:0.001,at:capture", TimeDelay(delay_s=0.001, at="capture")),
+        ("time_delay=delay_s:0.001,where:capture", TimeDelay(delay_s=0.001, where="capture")),
+        ("time_delay=delay_s:0.001,at:capture", TimeDelay(delay_s=0.001, where="capture")),  # older spelling
         ("cyclic_error=period_mm:5,amplitude:100", CyclicError(period_mm=5.0, amplitude=100.0)),
-        ("saturation=1.2", Saturation(limit=1.2)),
+        ("cyclic_error=period_mm:5,phase_rad:0.5", CyclicError(period_mm=5.0, phase_rad=0.5)),
+        ("cyclic_error=period_mm:5,phase_deg:90", CyclicError(period_mm=5.0, phase_rad=math.pi / 2)),
+        ("saturation=1.2", Saturation(limit_v=1.2)),
+        ("saturation=limit_v:1.2", Saturation(limit_v=1.2)),
+        ("saturation=limit:1.2", Saturation(limit_v=1.2)),  # older spelling: volts all the same
         ("backlash=gap_mm:0.01,axis:Y", Backlash(gap_mm=0.01, axis="Y")),
         (" Time-Delay = 0.002 ", TimeDelay(delay_s=0.002)),
     ],
@@ -221,9 +227,10 @@ def test_format_effect_round_trips(name):
         ("resonance=freq_hz:40,freq_hz:50", r"given twice"),
         ("resonance=freq_hz:nan", r"not a finite number"),
         ("resonance=freq_hz:40,damping", r"expected key:value"),
-        ("time_delay=delay_s:0.001,at:output", r"time_delay at must be one of actuation, feedback, capture"),
+        ("time_delay=delay_s:0.001,at:output", r"time_delay where must be one of actuation, feedback, capture"),
         ("stribeck=0.5", r"static_to_coulomb_ratio must be >= 1"),
-        ("saturation=0", r"saturation limit must be > 0"),
+        ("saturation=0", r"saturation limit_v must be > 0"),
+        ("saturation=limit_v:1,limit:2", r"parameter 'limit_v' given twice"),
     ],
 )
 def test_parse_effect_errors_are_one_line_and_name_the_problem(text, match):

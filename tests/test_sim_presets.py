@@ -95,7 +95,7 @@ def test_unknown_preset_is_a_one_line_error_listing_the_presets():
 
 def test_toml_round_trip_reproduces_the_machine(tmp_path):
     m = load_machine("fadal-pid")
-    m = replace(m, name="shop-vmc", effects=(Backlash(gap_mm=0.004, axis="X"), TimeDelay(0.0015, at="capture")),
+    m = replace(m, name="shop-vmc", effects=(Backlash(gap_mm=0.004, axis="X"), TimeDelay(0.0015, where="capture")),
                 j_max=40000.0)
     path = tmp_path / "vmc.toml"
     path.write_text(machine_to_toml(m), encoding="utf-8")

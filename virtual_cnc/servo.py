@@ -412,20 +412,20 @@ def simulate_axis_response(
     delay_sub = delay_fb = delay_cap = 0
     if isinstance(td, TimeDelay):
         steps = int(round(td.delay_s / h))
-        if td.at == "actuation":
+        if td.where == "actuation":
             delay_sub = steps
-        elif td.at == "feedback":
+        elif td.where == "feedback":
             delay_fb = steps
         else:
             delay_cap = steps
     cy = fx.get("cyclic_error")
     amp, period, phase = 0.0, 1.0, 0.0
     if isinstance(cy, CyclicError):
-        amp, period, phase = cy.amplitude, cy.period_mm, math.radians(cy.phase_deg)
+        amp, period, phase = cy.amplitude, cy.period_mm, cy.phase_rad
     u_max = p.u_max
     sat = fx.get("saturation")
     if isinstance(sat, Saturation):
-        u_max = min(u_max, sat.limit)
+        u_max = min(u_max, sat.limit_v)
 
     noise_t = rng.standard_normal(n) * enc.noise_std if enc.noise_std > 0 else np.zeros(n)
     noise_m = rng.standard_normal(n) * enc.noise_std if (enc.noise_std > 0 and two_mass) else np.zeros(n)

@@ -46,6 +46,8 @@ import numpy as np
 from scipy.signal import lfilter
 from threadpoolctl import threadpool_limits
 
+from core.effects import EFFECTS as REGISTRY
+from core.effects import parameter_units
 from core.errors import InputError
 from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, segment_starts
 from ident.diagnosis.candidates import (base_variants, fit_spec, refit_base, search, segment_variance_fit,
@@ -86,6 +88,8 @@ class Candidate:
         return {
             "effect": self.effect,
             "parameters": _jsonable(self.parameters),
+            # the unit of each number above, from the effect registry (core.effects)
+            "parameter_units": parameter_units(self.effect, self.parameters) if self.effect in REGISTRY else {},
             "parameters_interval95": _jsonable(self.intervals),
             "unresolved": dict(self.unresolved),
             "fit_before_pct": float(self.fit_before_pct),

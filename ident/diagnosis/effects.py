@@ -21,13 +21,20 @@ search in :mod:`ident.diagnosis.candidates` never ask which effect they hold:
   held-out likelihood ratio all the same;
 - ``words(p, intervals, unresolved)`` and ``signature(loc)``: what the user reads (each
   value with its 95 % interval or "not resolved"), what the localisation shows.
+
+Names, parameter names, units, the words of each variant (``loop``, ``kind``, ``where`` …)
+and admissible ranges are the effect registry's (:mod:`core.effects`); what lives here is
+how the diagnosis fits them (search boxes inside those ranges, starts, steps).
 """
 
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
+from core.effects import EFFECTS as REGISTRY
+from core.effects import MODEL, shown_unit
 from ident.diagnosis.augmented import MODE_SLOTS, simulate_augmented
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.spec import Chunk, ModelSpec, sse
@@ -128,6 +135,26 @@ class Effect:
     def variant(self, spec: ModelSpec) -> int:
         return int(spec.modes[MODE_SLOTS[self.name]]) if self.name in MODE_SLOTS else 0
 
+    @property
+    def called(self) -> str:
+        """How a sentence names the effect (the registry's words: "time delay")."""
+        return REGISTRY[self.name].words
+
+    def said(self, p: dict, key: str, fmt: str, intervals: dict | None = None, unresolved: dict | None = None) -> str:
+        """:func:`told` with the registry's unit of ``key``."""
+        return told(p, key, fmt, _unit(self.name, key), intervals, unresolved)
+
+
+def _variants(effect: str, key: str) -> tuple:
+    """The words of ``effect``'s variant parameter ``key`` by the simulator's mode value (registry order)."""
+    return REGISTRY[effect].choices(key, MODEL)
+
+
+def _unit(effect: str, key: str) -> str:
+    """" mm", " mm/s²" …: the registry's unit of ``key`` as a sentence shows it after a value."""
+    u = shown_unit(REGISTRY[effect].parameter(key).unit)
+    return f" {u}" if u and u != "-" else ""
+
 
 def told(p: dict, key: str, fmt: str, unit: str = "", intervals: dict | None = None,
          unresolved: dict | None = None, scale: float = 1.0) -> str:
@@ -153,7 +180,7 @@ class Backlash(Effect):
     recorded; mode 1: two masses across a stiff contact, the loop reading the table; mode 2:
     the two masses with the loop on the motor and the table recorded)."""
 
-    name = "backlash"
+    name = REGISTRY["backlash"].name
     added = 2
     two_mass = True
     scale_floor = {"gap_mm": 1e-3}
@@ -200,7 +227,7 @@ class Backlash(Effect):
 
     def parameters(self, spec, Ts=None):
         ep = spec.ep
-        loop = ("table_recorded", "table_fed_back", "table_recorded_two_mass")[int(spec.modes[0])]
+        loop = _variants(self.name, "loop")[int(spec.modes[0])]
         out = {"gap_mm": float(ep[0]), "loop": loop}
         if spec.modes[0]:
             out["motor_fraction"] = float(ep[11])
@@ -209,8 +236,9 @@ class Backlash(Effect):
 
     def set_arrays(self, p, ep, modes):
         ep[0] = p["gap_mm"]
-        if p.get("loop") in ("table_fed_back", "table_recorded_two_mass"):
-            modes[0] = 1 if p["loop"] == "table_fed_back" else 2
+        loops = _variants(self.name, "loop")
+        if p.get("loop") in loops[1:]:
+            modes[0] = loops.index(p["loop"])
             ep[11] = p.get("motor_fraction", 0.5)
             ep[12] = p.get("position_motor_share", 0.0)
 
@@ -219,7 +247,7 @@ class Backlash(Effect):
         return f"gap below {1e3 * cfg.min_gap_mm:.0f} µm" if g < cfg.min_gap_mm else ""
 
     def words(self, p, intervals=None, unresolved=None):
-        return f"backlash, gap {told(p, 'gap_mm', '.3g', ' mm', intervals, unresolved)}"
+        return f"{self.called}, gap {self.said(p, 'gap_mm', '.3g', intervals, unresolved)}"
 
     def signature(self, loc):
         return {"after_reversal_30ms_share": loc.get("after_reversal_30ms_share", 0.0),
@@ -229,7 +257,7 @@ class Backlash(Effect):
 class Stribeck(Effect):
     """Breakaway friction r·d at rest falling to Coulomb d with speed (v_s)."""
 
-    name = "stribeck"
+    name = REGISTRY["stribeck"].name
     added = 2
     scale_floor = {"stribeck_velocity_mm_s": 0.1}
 
@@ -255,8 +283,9 @@ class Stribeck(Effect):
                 if r < cfg.min_static_ratio else "")
 
     def words(self, p, intervals=None, unresolved=None):
-        return (f"Stribeck friction, static/Coulomb {told(p, 'static_to_coulomb_ratio', '.2g', '', intervals, unresolved)}, "
-                f"Stribeck velocity {told(p, 'stribeck_velocity_mm_s', '.2g', ' mm/s', intervals, unresolved)}")
+        ratio = self.said(p, 'static_to_coulomb_ratio', '.2g', intervals, unresolved)
+        return (f"{self.called}, static/Coulomb {ratio}, "
+                f"Stribeck velocity {self.said(p, 'stribeck_velocity_mm_s', '.2g', intervals, unresolved)}")
 
     def signature(self, loc):
         return {"low_speed_share": loc.get("low_speed_share", 0.0) + loc.get("at_rest_share", 0.0),
@@ -268,7 +297,7 @@ class Resonance(Effect):
     free-free mode of a two-mass drive inside the loop, closed on the table (mode 1) or on
     the motor with the table recorded (mode 2)."""
 
-    name = "resonance"
+    name = REGISTRY["resonance"].name
     added = 3
     two_mass = True
     scale_floor = {"gain": 0.1}
@@ -318,16 +347,18 @@ class Resonance(Effect):
             # the free-free mode f and the motor's share μ trade along f·√μ, the frequency the
             # table rings at when a stiff velocity loop holds the motor: what a recording
             # fixes best (candidates.scan_motor_fraction), told beside f
+            kinds, loops = _variants(self.name, "kind"), _variants(self.name, "loop")
             return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "motor_fraction": float(ep[11]),
-                    "kind": "two_mass", "loop": "motor" if spec.modes[3] == 2 else "table",
+                    "kind": kinds[1], "loop": loops[int(spec.modes[3]) - 1],
                     "position_motor_share": float(ep[12]),
                     "locked_motor_hz": float(ep[3]) * math.sqrt(max(float(ep[11]), 0.0))}
-        return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "gain": float(ep[5]), "kind": "output_filter"}
+        return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "gain": float(ep[5]),
+                "kind": _variants(self.name, "kind")[0]}
 
     def set_arrays(self, p, ep, modes):
         ep[3], ep[4] = p["freq_hz"], p["damping"]
-        if p.get("kind") == "two_mass":
-            modes[3] = 2 if p.get("loop") == "motor" else 1
+        if p.get("kind") == _variants(self.name, "kind")[1]:
+            modes[3] = 2 if p.get("loop") == _variants(self.name, "loop")[1] else 1
             ep[11] = p.get("motor_fraction", 0.5)
             ep[12] = p.get("position_motor_share", ep[12])
         else:
@@ -356,12 +387,13 @@ class Resonance(Effect):
         damping = ("damping not resolved (" + unresolved["damping"] + ")" if unresolved and "damping" in unresolved
                    else f"damping {told(p, 'damping', '.3f', '', intervals, unresolved)}")
         # a mode whose damping the data leave open is still an oscillation at that frequency
-        what = "an oscillatory mode" if unresolved and "damping" in unresolved else "resonance"
+        what = "an oscillatory mode" if unresolved and "damping" in unresolved else self.called
+        hz = _unit(self.name, "freq_hz")
         if "locked_motor_hz" in p:
-            return (f"{what} at {told(p, 'freq_hz', '.1f', ' Hz', intervals, unresolved)} (free two-mass mode; the "
-                    f"table rings at {told(p, 'locked_motor_hz', '.1f', ' Hz', intervals, unresolved)} with the "
+            return (f"{what} at {told(p, 'freq_hz', '.1f', hz, intervals, unresolved)} (free two-mass mode; the "
+                    f"table rings at {told(p, 'locked_motor_hz', '.1f', hz, intervals, unresolved)} with the "
                     f"motor held), {damping}")
-        return f"{what} at {told(p, 'freq_hz', '.1f', ' Hz', intervals, unresolved)}, {damping}"
+        return f"{what} at {told(p, 'freq_hz', '.1f', hz, intervals, unresolved)}, {damping}"
 
     def signature(self, loc):
         peaks = loc.get("spectrum_peaks", [])
@@ -373,7 +405,7 @@ class Resonance(Effect):
 class TimeDelay(Effect):
     """A dead time on the recorded position (mode 0) or inside the loop (mode 1)."""
 
-    name = "time_delay"
+    name = REGISTRY["time_delay"].name
     added = 1
     scale_floor = {"delay_s": 1e-3}
     #: dead times (samples) the regression starts know: a log grid up to the 10 ms a
@@ -424,7 +456,7 @@ class TimeDelay(Effect):
         # delay_s is the drive's dead time; a model whose delay also carries the lag of
         # sampling (sampling_lag) says how much, and simulates delay_s + sampling_lag_s
         lag = self.sampling_lag(spec, Ts) if Ts else 0.0
-        out = {"delay_s": float(spec.ep[6]) - lag, "where": "actuation" if spec.modes[1] else "capture"}
+        out = {"delay_s": float(spec.ep[6]) - lag, "where": _variants(self.name, "where")[int(spec.modes[1])]}
         if "delay_s" in spec.ranges:
             out["delay_range_s"] = [float(v) - lag for v in spec.ranges["delay_s"]]
         if lag:
@@ -433,7 +465,7 @@ class TimeDelay(Effect):
 
     def set_arrays(self, p, ep, modes):
         ep[6] = p["delay_s"] + p.get("sampling_lag_s", 0.0)
-        modes[1] = 1 if p.get("where") == "actuation" else 0
+        modes[1] = 1 if p.get("where") == _variants(self.name, "where")[1] else 0
 
     @staticmethod
     def sampling_lag(spec: ModelSpec, Ts: float) -> float:
@@ -463,7 +495,8 @@ class TimeDelay(Effect):
         return "delay within one sample period, the lag of sampling" if self.within_inherent_lag(spec, chunk.Ts) else ""
 
     def words(self, p, intervals=None, unresolved=None):
-        words = f"time delay {told(p, 'delay_s', '.2f', ' ms', intervals, unresolved, 1e3)} ({p['where']}"
+        # told in ms, the registry's delay_s (s) scaled for a reader of servo periods
+        words = f"{self.called} {told(p, 'delay_s', '.2f', ' ms', intervals, unresolved, 1e3)} ({p['where']}"
         lag = p.get("sampling_lag_s", 0.0)
         if lag:
             words += (f"; the continuous-loop model delays by {1e3 * (p['delay_s'] + lag):.2f} ms, the "
@@ -482,7 +515,7 @@ class TimeDelay(Effect):
 class CyclicError(Effect):
     """A position-periodic error of the recorded position (mode 0, mm) or force (mode 1, mm/s²)."""
 
-    name = "cyclic_error"
+    name = REGISTRY["cyclic_error"].name
     added = 3
     scale_floor = {"amplitude_sin": 1e-4, "amplitude_cos": 1e-4}
 
@@ -519,15 +552,16 @@ class CyclicError(Effect):
 
     def parameters(self, spec, Ts=None):
         ep = spec.ep
+        kind = _variants(self.name, "kind")[int(spec.modes[2])]
         return {"period_mm": float(ep[7]), "amplitude": float(np.hypot(ep[8], ep[9])),
-                "amplitude_unit": "mm/s^2" if spec.modes[2] else "mm", "phase_rad": float(np.arctan2(ep[9], ep[8])),
-                "kind": "disturbance" if spec.modes[2] else "position_error"}
+                "amplitude_unit": REGISTRY[self.name].parameter("amplitude").unit_by_variant[kind],
+                "phase_rad": float(np.arctan2(ep[9], ep[8])), "kind": kind}
 
     def set_arrays(self, p, ep, modes):
         ep[7] = p["period_mm"]
         phase = p.get("phase_rad", 0.0)
         ep[8], ep[9] = p["amplitude"] * math.cos(phase), p["amplitude"] * math.sin(phase)
-        modes[2] = 1 if p.get("kind") == "disturbance" else 0
+        modes[2] = 1 if p.get("kind") == _variants(self.name, "kind")[1] else 0
 
     def implausible(self, spec, chunk, cfg):
         # an error is periodic only where a whole period is seen (cfg.min_periods over the travel)
@@ -537,8 +571,8 @@ class CyclicError(Effect):
         return ""
 
     def words(self, p, intervals=None, unresolved=None):
-        return (f"cyclic error, period {told(p, 'period_mm', '.3g', ' mm', intervals, unresolved)}, amplitude "
-                f"{told(p, 'amplitude', '.3g', ' ' + p['amplitude_unit'], intervals, unresolved)}")
+        return (f"{self.called}, period {self.said(p, 'period_mm', '.3g', intervals, unresolved)}, amplitude "
+                f"{told(p, 'amplitude', '.3g', ' ' + shown_unit(p['amplitude_unit']), intervals, unresolved)}")
 
     def signature(self, loc):
         per = loc.get("position_periodic", {})
@@ -549,7 +583,7 @@ class CyclicError(Effect):
 class Saturation(Effect):
     """The control output clipped to ±limit, with (mode 0) or without (mode 1) anti-windup."""
 
-    name = "saturation"
+    name = REGISTRY["saturation"].name
     added = 1
 
     def free(self, spec):
@@ -570,16 +604,19 @@ class Saturation(Effect):
                 for q in (99.9, 99.0, 96.0) for psi in psis for w in (0, 1)]
 
     def parameters(self, spec, Ts=None):
-        return {"limit": float(spec.ep[10]), "limit_unit": "mm/s^2", "position_motor_share": float(spec.ep[12]),
-                "anti_windup": not bool(spec.modes[5])}
+        return {"limit": float(spec.ep[10]), "limit_unit": REGISTRY[self.name].parameter("limit").unit,
+                "position_motor_share": float(spec.ep[12]),
+                "anti_windup": _variants(self.name, "anti_windup")[int(spec.modes[5])]}
 
     def set_arrays(self, p, ep, modes):
         ep[10] = p["limit"]
         ep[12] = p.get("position_motor_share", ep[12])
-        modes[5] = 0 if p.get("anti_windup", True) else 1
+        modes[5] = _variants(self.name, "anti_windup").index(bool(p.get("anti_windup", True)))
 
     def words(self, p, intervals=None, unresolved=None):
-        return (f"saturation, limit {told(p, 'limit', '.4g', ' mm/s²', intervals, unresolved)}"
+        # the limit of the control-equivalent acceleration, not of an amplifier's volts
+        return (f"saturation of the control-equivalent acceleration, limit "
+                f"{self.said(p, 'limit', '.4g', intervals, unresolved)}"
                 + ("" if p.get("anti_windup", True) else ", integral winding up while clipped"))
 
     def signature(self, loc):
