@@ -46,7 +46,7 @@ def outputs() -> dict[str, np.ndarray]:
                                  u_max=8.0, timing=timing, integration=integration)
             out[f"loop_{kind}_{integration}_x"], out[f"loop_{kind}_{integration}_u"] = x, u
     for machine in ("fadal-ppi", "fadal-pid"):
-        r = simulate_axis_response(xr, load_machine(machine).axes["X"], (Saturation(limit=3.0),),
+        r = simulate_axis_response(xr, load_machine(machine).axes["X"], (Saturation(limit_v=3.0),),
                                    rng=np.random.default_rng(5))
         out[f"servo_{machine}_actual"], out[f"servo_{machine}_u"] = r.actual, r.u
     return out
