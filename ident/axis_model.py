@@ -12,11 +12,14 @@ fits and report, ``agent identify --against`` and the virtual machine
   feed-forward differentiating the command as the drive receives it);
 * the preview shift of the identification (§4.3.2, samples the command is advanced by).
 
-A plain model (no effects, continuous) is simulated by :func:`ident.simulation.simulate`,
-the exact discretisation the identification fits with; any effect or the sampled form
-by :func:`ident.diagnosis.augmented.simulate_augmented`, the simulator the diagnosis
-fitted those effects with — so a prediction always uses the simulator its parameters
-were fitted in.
+Every model runs in one simulator kernel, :func:`ident.diagnosis.augmented.simulate_augmented`
+(effects optional).  A plain model (no effects, continuous) is given to it the way the
+identification fitted it, through :func:`ident.simulation.simulate`: the feed-forward linear
+between samples, the integral state zero at a segment start, two runs extrapolated to
+second order.  A model with an effect or the sampled form is given to it the way the
+diagnosis fitted it (the commanded acceleration held over a sample, a start at rest with
+the integral at equilibrium, one run) — so a prediction always uses the inputs its
+parameters were fitted with.
 """
 
 from __future__ import annotations
@@ -28,11 +31,10 @@ import numpy as np
 
 from core.effect_limits import check_effect_parameters
 from core.errors import InputError
-from ident.model import DriveModel
+from ident.model import BASE_KEYS, DriveModel, base_vector
 
 __all__ = ["AxisModel", "BASE_KEYS", "EFFECT_NAMES", "CONTROLLERS"]
 
-BASE_KEYS = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
 #: SPEC §7 effects an axis model can carry (external_force is described, never simulated),
 #: in the order of the augmented simulator's flag vector.
 EFFECT_NAMES = ("backlash", "stribeck", "resonance", "time_delay", "cyclic_error", "saturation")
@@ -117,7 +119,7 @@ class AxisModel:
         from ident.diagnosis.augmented import EFFECTS, N_EP, N_MODES
         from ident.diagnosis.effects import EFFECT_MODELS
 
-        theta = np.array([getattr(self.model, k) for k in BASE_KEYS], dtype=float)
+        theta = base_vector(self.model)
         flags = np.array([1 if e in self.effects else 0 for e in EFFECTS], dtype=np.int64)
         ep = np.zeros(N_EP)
         modes = np.zeros(N_MODES, dtype=np.int64)

@@ -17,15 +17,13 @@ import math
 import numpy as np
 
 from core.errors import MachineError
-from ident.model import DriveModel
+from ident.model import BASE_KEYS, DriveModel
 
 __all__ = ["check_runnable", "SLOWEST_POLE_HZ"]
 
 #: A closed-loop pole slower than this (a time constant of 160 s) never lets the axis move
 #: within a part program.
 SLOWEST_POLE_HZ = 1e-3
-
-_BASE = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
 
 
 def check_runnable(model: DriveModel, Ts: float, what: str, *, sampled_loop: bool = False) -> None:
@@ -37,10 +35,10 @@ def check_runnable(model: DriveModel, Ts: float, what: str, *, sampled_loop: boo
     Ts : the sample period the model runs at, s.
     what : how the message names the model ("'X.a1=-3000' (axis X)", "machine.toml axis X").
     sampled_loop : the loop is closed once per sample (the virtual CNC's servo): a pole above
-        Nyquist is an error too.  The identified model is simulated by an exact
-        discretisation, which runs such a pole fine.
+        Nyquist is an error too.  The identified model's simulator takes as many sub-steps
+        as such a pole needs (:mod:`ident.simulation`), so it runs fine there.
     """
-    for k in _BASE:
+    for k in BASE_KEYS:
         v = getattr(model, k)
         if not math.isfinite(v):
             raise MachineError(f"{what}: {k} = {v} is not a finite number")

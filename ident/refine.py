@@ -16,8 +16,8 @@ with box bounds ``ω_n,min ≤ ω_n ≤ f_max``, ``ζ_min ≤ ζ ≤ ζ_max``, `
 (eq. 3.8, :class:`ident.model.Bounds`), so every iterate has its poles inside the
 constraint region.  A projected Levenberg–Marquardt with a finite-difference Jacobian
 (:func:`ident.least_squares.bounded_lm`; or, on request, ``scipy.optimize.least_squares``'
-trust-region reflective method) does the search on a coarser simulator (``substeps_search``
-friction sub-steps; the linear part is exact either way) and on every k-th residual; the
+trust-region reflective method) does the search on a coarser simulator
+(``substeps_search`` sub-steps, :mod:`ident.simulation`) and on every k-th residual; the
 before/after fit is computed with the default simulator on all samples.  The refined
 model is returned only if it improves the fit of the (bounded) starting model.
 """
@@ -34,7 +34,7 @@ from core.errors import InputError
 from ident.fixed_order import sum_squares
 from ident.least_squares import bounded_lm
 from ident.metrics import FitResult, fit_result
-from ident.model import Bounds, DriveModel, alphas_from_search
+from ident.model import Bounds, DriveModel, alphas_from_search, base_vector
 from ident.preprocessing import shift_command
 from ident.simulation import DEFAULT_SUBSTEPS, FreeRun, simulate
 
@@ -107,7 +107,7 @@ def _start_point(model, bounds: Bounds, Ts: float, regression=None) -> np.ndarra
     denominator (as eq. 4.9 does for every candidate denominator).
     """
     if not isinstance(model, DriveModel):  # any object with the eight fields
-        model = DriveModel(*(float(getattr(model, k)) for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")))
+        model = DriveModel(*base_vector(model))
     wn, zeta, p = model.search_variables(bounds, Ts)
     f_max = bounds.f_max(Ts)
     wn_c = bounds.wn_min if not math.isfinite(wn) else min(max(wn, bounds.wn_min), f_max)
@@ -187,7 +187,8 @@ def refine(
         finite-difference Jacobian plus one or more trial steps, ~1–3 ms each per
         25 000 samples).
     substeps_search : int
-        Friction sub-steps of the simulator during the search (the final fit uses the default).
+        Sub-steps of the simulator during the search (the final fit uses the default); raised
+        to the model's need (:mod:`ident.simulation`).
     max_evals : int or None
         Stop the search after this many simulations (the best point so far is kept).  A
         count, not a wall time, so that the result does not depend on the machine or its
