@@ -3,9 +3,9 @@
 * ``simulate``: eq. 3.3 with Coulomb friction, 25 s at 1 kHz (25 000 samples), after the
   numba warm-up, for 4 sub-steps (default) and 2 (the refinement's search); target ≤ 50 ms.
   Its accuracy: the friction-free model against ``scipy.signal.lsim`` of G_track (an
-  independent reference; both see the same central-difference command derivatives only in
-  the simulator, so a floor of O(Ts²) remains), and with friction against the same
-  simulator on 64 sub-steps, as a fraction of the tracking error's spread.
+  independent reference; the simulator's feed-forward reads the central differences of
+  eq. 3.9, lsim the transfer function, which leaves a floor of O(Ts²)), and with friction
+  against the same simulator on 64 sub-steps, as rms over the tracking error's spread.
 * ``refine``: from a perturbed start on a 25 s synthetic recording (thesis Table 4.1
   drive, 0.1 µm noise), and on EMPS (shared/data/emps) from the exact constrained solver;
   target ≲ 1 s.

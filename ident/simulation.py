@@ -29,14 +29,10 @@ restarts from rest for the rest of it, so x̂ depends continuously on the parame
 twice, on n and 2n sub-steps per sample, and extrapolated (Richardson): the scheme's error
 is c·h + O(h²), so ``2·x̂(2n) − x̂(n)`` is second order.  n is ``substeps``, raised so the
 fastest pole turns at most 1.5 rad a sub-step (the scheme's stability; :data:`_STEP_RAD`).
-On the thesis drives and EMPS the result differs from an exact discretisation of the
-linear part (matrix exponential, friction held over a sub-step: the simulator this module
-held before) by at most 2e-3 of the tracking error's spread at n = 4, 7e-3 at n = 2, where
-the kernel alone (no extrapolation) is 1–9 % off at 8 sub-steps.  For d0 = d1 = 0 it is
-the linear model.
-
-A 25 000-sample run costs 3n sub-steps of the kernel, about a millisecond at n = 2 after
-the first (numba-compiled, cached) call; see ``benchmarks/bench_model_simulation.py``.
+Its accuracy and run time are printed by ``benchmarks/bench_model_simulation.py``: the
+friction-free model against ``scipy.signal.lsim`` of G_track, and with friction against
+64 sub-steps, as a fraction of the tracking error's spread; a 25 000-sample run costs 3n
+sub-steps of the kernel after the first (numba-compiled, cached) call.
 """
 
 from __future__ import annotations
