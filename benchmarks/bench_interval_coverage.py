@@ -1,8 +1,8 @@
 """How often the 95 % intervals of ident/uncertainty.py cover a known truth, and how their
 widths compare with the spread of the estimates over noise realisations.
 
-The drive is the thesis's PID drive (Table 3.4, X, "Actual"), run by the model's own free-run
-simulator (``ident.simulation.simulate``) on the command of the default identification
+The drive is the thesis's PID drive (Table 3.4, X, "Actual"), run by the model's own exact
+discretisation (``ident.simulation.simulate``) on the command of the default identification
 programs (seed 7, through the virtual CNC's interpolator), so the truth is in the model
 class and only the noise is random: 0.5 µm AR(1) noise with correlation 0.9 per sample
 (integrated time 19 samples, like a closed loop's residual), then white (correlation 0);

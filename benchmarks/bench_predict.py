@@ -4,7 +4,7 @@ A 60 s, three-axis part program (lines and arcs in XY at 30–150 mm/s, Z steps 
 passes) run on a virtual machine identified from a fadal-pid (Table 3.4) capture — the
 X model is also used for Z — at 1 kHz: interpolation, the free run of every axis and the
 contour-error analysis, after start-up (the first run, which loads numba's cache, is
-reported apart).  Once on the plain identified model (eq. 3.3) and
+reported apart).  Once on the plain identified model (eq. 3.3, exact discretisation) and
 once with a backlash and a Stribeck effect on every axis (the diagnosis's simulator).
 Target: ≤ 1 s.  Figures are medians of 5 runs in one process.
 

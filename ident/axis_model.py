@@ -12,14 +12,11 @@ fits and report, ``agent identify --against`` and the virtual machine
   feed-forward differentiating the command as the drive receives it);
 * the preview shift of the identification (§4.3.2, samples the command is advanced by).
 
-Every model runs in one simulator kernel, :func:`ident.diagnosis.augmented.simulate_augmented`
-(effects optional).  A plain model (no effects, continuous) is given to it the way the
-identification fitted it, through :func:`ident.simulation.simulate`: the feed-forward linear
-between samples, the integral state zero at a segment start, two runs extrapolated to
-second order.  A model with an effect or the sampled form is given to it the way the
-diagnosis fitted it (the commanded acceleration held over a sample, a start at rest with
-the integral at equilibrium, one run) — so a prediction always uses the inputs its
-parameters were fitted with.
+A plain model (no effects, continuous) is simulated by :func:`ident.simulation.simulate`,
+the exact discretisation the identification fits with; any effect or the sampled form
+by :func:`ident.diagnosis.augmented.simulate_augmented`, the simulator the diagnosis
+fitted those effects with — so a prediction always uses the simulator its parameters
+were fitted in.
 """
 
 from __future__ import annotations

@@ -35,8 +35,8 @@ def check_runnable(model: DriveModel, Ts: float, what: str, *, sampled_loop: boo
     Ts : the sample period the model runs at, s.
     what : how the message names the model ("'X.a1=-3000' (axis X)", "machine.toml axis X").
     sampled_loop : the loop is closed once per sample (the virtual CNC's servo): a pole above
-        Nyquist is an error too.  The identified model's simulator takes as many sub-steps
-        as such a pole needs (:mod:`ident.simulation`), so it runs fine there.
+        Nyquist is an error too.  The identified model is simulated by an exact
+        discretisation, which runs such a pole fine.
     """
     for k in BASE_KEYS:
         v = getattr(model, k)

@@ -16,8 +16,8 @@ with box bounds ``ω_n,min ≤ ω_n ≤ f_max``, ``ζ_min ≤ ζ ≤ ζ_max``, `
 (eq. 3.8, :class:`ident.model.Bounds`), so every iterate has its poles inside the
 constraint region.  A projected Levenberg–Marquardt with a finite-difference Jacobian
 (:func:`ident.least_squares.bounded_lm`; or, on request, ``scipy.optimize.least_squares``'
-trust-region reflective method) does the search on a coarser simulator
-(``substeps_search`` sub-steps, :mod:`ident.simulation`) and on every k-th residual; the
+trust-region reflective method) does the search on a coarser simulator (``substeps_search``
+friction sub-steps; the linear part is exact either way) and on every k-th residual; the
 before/after fit is computed with the default simulator on all samples.  The refined
 model is returned only if it improves the fit of the (bounded) starting model.
 """
@@ -187,8 +187,7 @@ def refine(
         finite-difference Jacobian plus one or more trial steps, ~1–3 ms each per
         25 000 samples).
     substeps_search : int
-        Sub-steps of the simulator during the search (the final fit uses the default); raised
-        to the model's need (:mod:`ident.simulation`).
+        Friction sub-steps of the simulator during the search (the final fit uses the default).
     max_evals : int or None
         Stop the search after this many simulations (the best point so far is kept).  A
         count, not a wall time, so that the result does not depend on the machine or its

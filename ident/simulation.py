@@ -1,53 +1,66 @@
-"""Free-run simulation of the identified closed-loop drive model of eq. 3.3 from the commanded trajectory.
+"""Free-run simulation of the closed-loop drive model of eq. 3.3 from the commanded trajectory.
 
 Eq. 3.3 in the time domain, with the integral state ``z = ∫(x_r − x) dt``::
 
     ẍ = b0·ẍ_r + b1·ẋ_r + b2·x_r  − a1·ẋ − a2·x + a3·z − f,      ż = x_r − x
-    f = d0 if ẋ > 0,  d1 if ẋ < 0,  Karnopp stick band [d1, d0] if ẋ = 0       (eq. 3.2)
+    f = d0 if ẋ > 0,  d1 if ẋ < 0,  stick (see below) if ẋ = 0            (eq. 3.2)
 
-``ẋ_r`` and ``ẍ_r`` are the central differences of eq. 3.9 (one-sided at segment ends,
-:func:`ident.diagnosis.augmented.command_derivatives`), the same signals the regression of
+State ``s = [z, x, ẋ]`` (mm·s, mm, mm/s), inputs ``w = [x_r, u, f]`` with the command
+drive ``u = b0·ẍ_r + b1·ẋ_r + b2·x_r`` (mm/s²).  ``ẋ_r`` and ``ẍ_r`` are the central
+differences of eq. 3.9 (one-sided at segment ends), the same signals the regression of
 eq. 3.11 uses, so the simulated model is the identified one.
 
-**One kernel.**  This module is the identification's view of the one simulator of the
-identified model, :func:`ident.diagnosis.augmented.simulate_augmented` with no effect and
-the continuous control law: the output-error refinement (:mod:`ident.refine`), the
-intervals (:mod:`ident.uncertainty`), plain predictions (:class:`ident.axis_model.AxisModel`)
-and the diagnosis's external-force check all run that kernel through :class:`FreeRun`.
-Two things are the identification's own, and are given to the kernel as its inputs:
+**Integration**: exact discretisation of the linear part for inputs that are linear
+between samples (first-order hold of x_r and u) and friction held over a sub-step: the
+matrix exponential of the augmented matrix ``[[A, B, 0], [0, 0, I], [0, 0, 0]]·h``
+(computed in numba: scipy's ``expm`` goes through multi-threaded BLAS, which costs
+milliseconds on a loaded machine) gives ``s(t+h) = Φ·s + Γ0·w + Γ1·ẇ`` — exact for any pole location (no stiffness limit).
+Each sample period is split into ``substeps`` sub-steps so that friction switches within a
+period are resolved to Ts/substeps.
 
-* the feed-forward ``b0·ẍ_r + b1·ẋ_r`` (plus an optional ``disturbance``) enters as one
-  signal interpolated linearly between samples (the kernel's commanded-velocity input with
-  b0 = 0, b1 = 1), where the diagnosis's own base holds ẍ_r over a sample;
-* each segment starts at the recorded (or commanded) position with ``z = 0`` and ẋ = ẋ_r
-  (consistent with the regression's e_i, see :mod:`ident.preprocessing`), written as the
-  kernel's warm start — the diagnosis starts at rest with the integral at equilibrium.
+**Friction** (Karnopp stick rule, no chattering): while moving the friction is d0 (ẋ>0)
+or d1 (ẋ<0).  When ẋ crosses zero inside a sub-step the crossing instant is interpolated;
+if the net drive ``F = u − a2·x + a3·z`` (the acceleration at ẋ = 0 without friction)
+still exceeds the friction of the new direction the axis reverses (the state is corrected
+for the friction change over the rest of the sub-step), otherwise it sticks.  While stuck,
+ẋ = 0 and x is constant — the friction supplies exactly F, which is possible while
+d1 ≤ F ≤ d0 — and the axis breaks away when F leaves that band, at the instant
+interpolated inside the sub-step (so x̂ depends continuously on the parameters, which the
+output-error refinement's finite differences need).  For d0 = d1 = 0 this
+reduces to the linear model exactly.
 
-**Integration**: the kernel's semi-implicit Euler with Karnopp friction (an axis at rest
-sticks while the net drive lies within [d1, d0]; a velocity reaching zero inside a sub-step
-restarts from rest for the rest of it, so x̂ depends continuously on the parameters), run
-twice, on n and 2n sub-steps per sample, and extrapolated (Richardson): the scheme's error
-is c·h + O(h²), so ``2·x̂(2n) − x̂(n)`` is second order.  n is ``substeps``, raised so the
-fastest pole turns at most 1.5 rad a sub-step (the scheme's stability; :data:`_STEP_RAD`).
-Its accuracy and run time are printed by ``benchmarks/bench_model_simulation.py``: the
-friction-free model against ``scipy.signal.lsim`` of G_track, and with friction against
-64 sub-steps, as a fraction of the tracking error's spread; a 25 000-sample run costs 3n
-sub-steps of the kernel after the first (numba-compiled, cached) call.
+**Segments**: the state restarts at each segment start (no integration across a seam):
+z = 0 (consistent with the regression's e_i, see :mod:`ident.preprocessing`), x from
+``x0`` (the recorded actual position) or the command, ẋ = ẋ_r.
+
+A 25 000-sample run takes a few ms after the first (numba-compiled, cached) call; see
+``benchmarks/bench_model_simulation.py``.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from ident.model import base_vector
 from ident.preprocessing import segment_slices
 
-__all__ = ["simulate", "FreeRun", "command_drive", "DEFAULT_SUBSTEPS"]
+__all__ = ["simulate", "FreeRun", "command_drive", "discretise", "DEFAULT_SUBSTEPS"]
 
-#: Sub-steps per sample (fewer are raised to the model's own need).
-DEFAULT_SUBSTEPS = 4
-#: Largest turn of the fastest pole per sub-step, rad (stability: < 2).
-_STEP_RAD = 1.5
+#: Sub-steps per sample period for the friction switching (exact linear part regardless).
+DEFAULT_SUBSTEPS = 8
+
+
+def _params(model) -> tuple[float, ...]:
+    """The eight parameters of eq. 3.3 (:data:`ident.model.BASE_KEYS`) from a DriveModel-like object."""
+    return tuple(base_vector(model))
+
+
+def _gradient(x: np.ndarray, Ts: float) -> np.ndarray:
+    """Central differences inside, one-sided at the ends (eq. 3.9); zeros for < 2 samples."""
+    if x.size < 2:
+        return np.zeros_like(x)
+    return np.gradient(x, Ts)
 
 
 def command_drive(model, x_r: np.ndarray, Ts: float, segment: np.ndarray | None = None) -> np.ndarray:
@@ -63,29 +76,179 @@ def command_drive(model, x_r: np.ndarray, Ts: float, segment: np.ndarray | None 
     segment : ndarray of int (N,), optional
         Segment ids; derivatives are taken within each segment only.
     """
-    _, _, _, b0, b1, b2, _, _ = base_vector(model)
+    _, _, _, b0, b1, b2, _, _ = _params(model)
     fr = FreeRun(x_r, Ts, segment=segment)
     return b0 * fr.xr_ddot + b1 * fr.xr_dot + b2 * fr.x_r
 
 
-def _least_substeps(theta: np.ndarray, Ts: float) -> int:
-    """Fewest sub-steps per sample for which the kernel's semi-implicit Euler is stable on ``theta``.
+@njit(cache=True)
+def _matmul(A, B):  # pragma: no cover - numba
+    """Small dense product with plain loops (BLAS threading costs ms on tiny matrices)."""
+    n, k = A.shape
+    m = B.shape[1]
+    C = np.zeros((n, m))
+    for i in range(n):
+        for j in range(m):
+            acc = 0.0
+            for r in range(k):
+                acc += A[i, r] * B[r, j]
+            C[i, j] = acc
+    return C
 
-    The scheme is stable while h·|λ| < 2 for the fastest closed-loop pole λ and h·a1 < 2 for
-    the damping it takes explicitly; :data:`_STEP_RAD` keeps a margin.  Accuracy is the
-    extrapolation's (:meth:`FreeRun.__call__`), not this bound's.
+
+@njit(cache=True)
+def _expm(M):  # pragma: no cover - numba
+    """exp(M) by scaling and squaring with a degree-18 Taylor series (‖M/2^s‖₁ ≤ 0.5).
+
+    Truncation error ≤ 0.5^19/19! ≈ 1.6e-23 relative before squaring: exact to rounding.
     """
-    lam = max(float(np.max(np.abs(np.roots([1.0, theta[0], theta[1], theta[2]])))), abs(float(theta[0])))
-    return max(int(np.ceil(Ts * lam / _STEP_RAD)), 1)
+    n = M.shape[0]
+    norm = 0.0
+    for j in range(n):
+        c = 0.0
+        for i in range(n):
+            c += abs(M[i, j])
+        norm = max(norm, c)
+    s = 0
+    while norm > 0.5:
+        norm *= 0.5
+        s += 1
+    A = M / (2.0**s)
+    E = np.eye(n)
+    term = np.eye(n)
+    for k in range(1, 19):
+        term = _matmul(term, A) / k
+        E += term
+    for _ in range(s):
+        E = _matmul(E, E)
+    return E
+
+
+def discretise(model, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact first-order-hold discretisation of eq. 3.3's linear part over a step ``h`` (s).
+
+    Returns ``Φ`` (3×3), ``Γ0`` (3×3), ``Γ1`` (3×3) such that for inputs
+    ``w(t+τ) = w + τ·ẇ`` (``w = [x_r, u, f]``) the state ``[z, x, ẋ]`` advances as
+    ``s(t+h) = Φ s(t) + Γ0 w + Γ1 ẇ``: the blocks of ``exp([[A, B, 0], [0, 0, I], [0, 0, 0]]·h)``.
+    """
+    a1, a2, a3, *_ = _params(model)
+    A = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [a3, -a2, -a1]])
+    B = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, -1.0]])
+    M = np.zeros((9, 9))
+    M[:3, :3] = A
+    M[:3, 3:6] = B
+    M[3:6, 6:9] = np.eye(3)
+    E = _expm(M * h)
+    return E[:3, :3].copy(), E[:3, 3:6].copy(), E[:3, 6:9].copy()
+
+
+@njit(cache=True)
+def _free_run(xr, u, starts, stops, x_init, v_init, Phi, G0, G1, a2, a3, d0, d1, m, Ts):  # pragma: no cover - numba
+    n = xr.shape[0]
+    out = np.empty(n)
+    h = Ts / m
+    for sidx in range(starts.shape[0]):
+        a = starts[sidx]
+        b = stops[sidx]
+        z = 0.0
+        x = x_init[sidx]
+        v = v_init[sidx]
+        mode = 0
+        if v > 0.0:
+            mode = 1
+        elif v < 0.0:
+            mode = -1
+        out[a] = x
+        for k in range(a, b - 1):
+            xr_k = xr[k]
+            u_k = u[k]
+            sr = (xr[k + 1] - xr_k) / Ts  # FOH slopes, mm/s and mm/s³
+            su = (u[k + 1] - u_k) / Ts
+            for j in range(m):
+                xa = xr_k + sr * (j * h)
+                ua = u_k + su * (j * h)
+                if mode == 0:
+                    F = ua - a2 * x + a3 * z  # acceleration at ẋ = 0 without friction
+                    up = F > d0
+                    dn = F < d1
+                    if up and dn:  # only if d1 > d0 (unphysical friction): stronger side wins
+                        if F - d0 >= d1 - F:
+                            dn = False
+                        else:
+                            up = False
+                    if up:
+                        mode = 1
+                    elif dn:
+                        mode = -1
+                    else:  # stuck: friction balances F, x and ẋ = 0 held, z integrates
+                        z += h * (xa + 0.5 * sr * h) - h * x
+                        v = 0.0
+                        # Break away inside the sub-step if F leaves [d1, d0] before its end:
+                        # interpolate the instant, so x̂ depends continuously on the parameters.
+                        Fb = (ua + su * h) - a2 * x + a3 * z
+                        if Fb > d0 or Fb < d1:
+                            fb = d0 if Fb > d0 else d1
+                            dF = Fb - F
+                            tau = (fb - F) / dF if dF != 0.0 else 1.0
+                            if tau < 0.0:
+                                tau = 0.0
+                            elif tau > 1.0:
+                                tau = 1.0
+                            r = (1.0 - tau) * h
+                            acc = Fb - fb  # net acceleration, ramping up from 0 over r
+                            v = 0.5 * acc * r
+                            x += acc * r * r / 6.0
+                            mode = 1 if Fb > d0 else -1
+                        continue
+                f = d0 if mode == 1 else d1
+                zn = Phi[0, 0] * z + Phi[0, 1] * x + Phi[0, 2] * v + G0[0, 0] * xa + G0[0, 1] * ua + G0[0, 2] * f + G1[0, 0] * sr + G1[0, 1] * su
+                xn = Phi[1, 0] * z + Phi[1, 1] * x + Phi[1, 2] * v + G0[1, 0] * xa + G0[1, 1] * ua + G0[1, 2] * f + G1[1, 0] * sr + G1[1, 1] * su
+                vn = Phi[2, 0] * z + Phi[2, 1] * x + Phi[2, 2] * v + G0[2, 0] * xa + G0[2, 1] * ua + G0[2, 2] * f + G1[2, 0] * sr + G1[2, 1] * su
+                if mode * vn <= 0.0:
+                    # ẋ reached zero inside the sub-step: interpolate the instant, then
+                    # reverse (if the drive beats the other friction) or stick.
+                    dv = v - vn
+                    tau = v / dv if dv != 0.0 else 1.0
+                    if tau < 0.0:
+                        tau = 0.0
+                    elif tau > 1.0:
+                        tau = 1.0
+                    r = (1.0 - tau) * h
+                    F = (ua + su * h) - a2 * xn + a3 * zn
+                    if mode == 1:
+                        rev = F < d1
+                        f_new = d1
+                    else:
+                        rev = F > d0
+                        f_new = d0
+                    if rev:
+                        df = f_new - f  # friction change over the remaining r seconds
+                        vn -= df * r
+                        xn -= 0.5 * df * r * r
+                        if mode * vn < 0.0:
+                            mode = -mode
+                        else:
+                            vn = 0.0
+                            mode = 0
+                    else:
+                        xn -= 0.5 * vn * r  # undo the overshoot past the stop
+                        vn = 0.0
+                        mode = 0
+                z = zn
+                x = xn
+                v = vn
+            out[k + 1] = x
+    return out
 
 
 class FreeRun:
     """The free-run simulation of one commanded trajectory, for many models.
 
-    Everything that depends only on the command — segment starts, start positions, the
+    Everything that depends only on the command — segment bounds, start states, the
     central-difference ẋ_r and ẍ_r — is computed once; calling the object with a model
-    forms the feed-forward and the start states and runs the kernel.  The output-error
-    refinement calls it hundreds of times.  Parameters as :func:`simulate`.
+    only forms ``u = b0·ẍ_r + b1·ẋ_r + b2·x_r``, discretises and runs the recursion.
+    The output-error refinement calls it hundreds of times.  Parameters as
+    :func:`simulate`.
     """
 
     def __init__(
@@ -97,28 +260,35 @@ class FreeRun:
         x0: float | np.ndarray | None = None,
         substeps: int = DEFAULT_SUBSTEPS,
     ) -> None:
-        from ident.diagnosis.augmented import command_derivatives, segment_starts
-
         x_r = np.ascontiguousarray(x_r, dtype=float)
         if x_r.ndim != 1:
             raise ValueError(f"x_r must be 1-D (N,), got shape {x_r.shape}")
         if not (np.isfinite(Ts) and Ts > 0):
             raise ValueError(f"Ts must be a positive sample period in s, got {Ts!r}")
         n = x_r.size
+        slices = segment_slices(segment, n)
+        starts = np.array([s.start for s in slices], dtype=np.int64)
+        stops = np.array([s.stop for s in slices], dtype=np.int64)
         if x0 is None:
-            x_start = x_r.copy()
+            x_init = x_r[starts].copy()
         elif np.ndim(x0) == 0:
-            if len(segment_slices(segment, n)) != 1:
+            if len(slices) != 1:
                 raise ValueError("a scalar x0 is ambiguous with several segments; pass the recorded positions (N,)")
-            x_start = np.full(n, float(x0))
+            x_init = np.array([float(x0)])
         else:
-            x_start = np.ascontiguousarray(x0, dtype=float)
-            if x_start.shape != (n,):
-                raise ValueError(f"x0 has shape {x_start.shape}, expected () or ({n},)")
+            x0 = np.asarray(x0, dtype=float)
+            if x0.shape != (n,):
+                raise ValueError(f"x0 has shape {x0.shape}, expected () or ({n},)")
+            x_init = x0[starts].copy()
+        xr_dot = np.empty_like(x_r)
+        xr_ddot = np.empty_like(x_r)
+        for sl in slices:
+            xr_dot[sl] = _gradient(x_r[sl], Ts)
+            xr_ddot[sl] = _gradient(xr_dot[sl], Ts)
         self.x_r, self.Ts, self.n = x_r, float(Ts), n
-        self.starts = segment_starts(n, segment)
-        self.x_start = x_start
-        self.xr_dot, self.xr_ddot = command_derivatives(x_r, self.Ts, self.starts)
+        self.starts, self.stops, self.x_init = starts, stops, x_init
+        self.v_init = xr_dot[starts].copy()
+        self.xr_dot, self.xr_ddot = xr_dot, xr_ddot
         self.substeps = max(int(substeps), 1)
 
     def __call__(self, model, disturbance: np.ndarray | None = None) -> np.ndarray:
@@ -127,34 +297,16 @@ class FreeRun:
         ``disturbance`` (N,), mm/s², is an extra acceleration entering where ``u`` does
         (a load; see :mod:`ident.diagnosis.disturbance`), held linear between samples.
         """
-        theta = base_vector(model)
         if self.n == 0:
             return np.empty(0)
-        n = max(self.substeps, _least_substeps(theta, self.Ts)) if np.all(np.isfinite(theta)) else self.substeps
-        feed = theta[3] * self.xr_ddot + theta[4] * self.xr_dot
+        a1, a2, a3, b0, b1, b2, d0, d1 = _params(model)
+        u = b0 * self.xr_ddot + b1 * self.xr_dot + b2 * self.x_r
         if disturbance is not None:
-            feed = feed + np.asarray(disturbance, dtype=float)
-        # Richardson extrapolation of the first-order scheme: its error is c·h + O(h²), so
-        # 2·x̂(h/2) − x̂(h) is second order.
-        return 2.0 * self._run(theta, feed, 2 * n) - self._run(theta, feed, n)
-
-    def _run(self, theta: np.ndarray, feed: np.ndarray, nsub: int) -> np.ndarray:
-        """One free run of the kernel on ``nsub`` sub-steps, feed-forward ``feed`` (mm/s²)."""
-        from ident.diagnosis.augmented import simulate_augmented
-
-        a1, a2, _, _, _, b2, d0, d1 = theta
-        # The start state z = 0, ẋ = ẋ_r as the kernel's warm start: the acceleration at the
-        # start whose force balance leaves its integral at zero (its velocity lives half a
-        # sub-step back, ẋ_r − a·h/2, and its damping term reads that one).
-        v = self.xr_dot
-        friction = np.where(v > 0.0, d0, np.where(v < 0.0, d1, 0.0))
-        h = self.Ts / nsub
-        with np.errstate(all="ignore"):
-            a = (feed + b2 * self.x_r - a2 * self.x_start - a1 * v - friction) / (1.0 - 0.5 * h * a1)
-        kernel_theta = theta.copy()
-        kernel_theta[3:5] = 0.0, 1.0  # u's feed-forward is `feed`, given as the velocity input
-        return simulate_augmented(self.x_r, self.x_start, self.Ts, kernel_theta, starts=self.starts,
-                                  derivs=(feed, np.zeros(self.n)), nsub=nsub, warm=(self.starts, v, a))
+            u = u + np.asarray(disturbance, dtype=float)
+        m = self.substeps
+        Phi, G0, G1 = discretise(model, self.Ts / m)
+        return _free_run(self.x_r, u, self.starts, self.stops, self.x_init, self.v_init,
+                         Phi, G0, G1, a2, a3, d0, d1, m, self.Ts)
 
 
 def simulate(
@@ -186,7 +338,7 @@ def simulate(
         (the recorded actual position) → its value at each segment start; a float → the
         start of a single-segment recording.
     substeps : int
-        Sub-steps per sample (raised to the model's need, see the module docstring).
+        Sub-steps per sample for resolving friction switching (the linear part is exact).
     disturbance : ndarray (N,), optional
         Extra acceleration input, mm/s² (an external load), added to the command drive.
 

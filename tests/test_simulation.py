@@ -142,29 +142,6 @@ def test_bad_arguments_are_rejected():
         simulate(object(), np.zeros(10), TS)
 
 
-def test_the_identification_simulates_in_the_one_kernel_of_the_augmented_model():
-    # b0 = 0 and a command from rest at 0: the identification's start (integral 0, ẋ = ẋ_r = 0)
-    # and feed-forward (linear between samples) are then the diagnosis's too, so the plain
-    # simulator is the kernel's free run extrapolated from n and 2n sub-steps, to rounding.
-    from ident.diagnosis.augmented import simulate_augmented
-
-    m = thesis_model(b0=0.0)
-    x_r = np.r_[np.zeros(20), smooth_command(1.5)[1]]  # at rest: ẋ_r = 0 at the start
-    theta = np.array([m.a1, m.a2, m.a3, m.b0, m.b1, m.b2, m.d0, m.d1])
-    for n in (2, 4):
-        kernel = 2 * simulate_augmented(x_r, x_r, TS, theta, nsub=2 * n) - simulate_augmented(x_r, x_r, TS, theta, nsub=n)
-        assert np.max(np.abs(simulate(m, x_r, TS, substeps=n) - kernel)) < 1e-9 * np.max(np.abs(x_r))
-
-
-def test_the_extrapolated_free_run_converges_at_second_order():
-    m = thesis_model(b0=0.3, d0=0.0, d1=0.0)
-    _, x_r = smooth_command()
-    fine = simulate(m, x_r, TS, substeps=128)
-    errs = [np.sqrt(np.mean((simulate(m, x_r, TS, substeps=n) - fine) ** 2)) for n in (2, 4, 8)]
-    # a first-order scheme halves its error per doubling; this one about quarters it
-    assert errs[0] / errs[1] > 3.0 and errs[1] / errs[2] > 3.0
-
-
 def test_a_load_enters_where_the_command_drive_does():
     # a constant extra acceleration w on a loop with integral action: the same response as
     # the command drive raised by w (the integral then takes it up, no lasting offset)

@@ -35,7 +35,7 @@ def _ar1(n: int, rho: float, sigma_mm: float, seed: int) -> np.ndarray:
 @pytest.fixture(scope="module")
 def pid_drive():
     """The thesis's PID drive (Table 3.4, X) run on a 20 s random point-to-point command by
-    the model's own free-run simulator: the truth is in the model class, only noise is random."""
+    the model's own exact discretisation: the truth is in the model class, only noise is random."""
     cmd = point_to_point(20.0, TS, seed=3)
     return cmd, simulate(PID_X, cmd.x, TS)
 

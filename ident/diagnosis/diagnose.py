@@ -43,6 +43,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import numpy as np
+from scipy.signal import lfilter
 from threadpoolctl import threadpool_limits
 
 from core.errors import InputError
@@ -58,7 +59,6 @@ from ident.diagnosis.residuals import localise
 from ident.model import BASE_KEYS, base_vector
 
 __all__ = ["Candidate", "Diagnosis", "diagnose"]
-
 
 
 @dataclass(frozen=True)
@@ -453,7 +453,6 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig) -> dic
     worse sits in another valley of the base parameters, and its held-out gain compares two
     valleys, not the model with and without the effect.
     """
-    from scipy.signal import lfilter  # imported when used: ident.simulation imports this package
     from scipy.stats import chi2
 
     def one(new: list[np.ndarray], old: list[np.ndarray], whiten: bool) -> tuple[float, float]:
