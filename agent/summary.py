@@ -12,6 +12,7 @@ import math
 import typer
 
 from ident.headline import axis_headline, comparison_words, term_notes
+from ident.model import BASE_KEYS
 from ident.results import AxisResult, IdentifyResult
 
 
@@ -51,8 +52,7 @@ def print_summary(result: IdentifyResult) -> None:
         else:
             echo(f"  details: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
                  + f", preview shift {r.shift} sample(s)")
-        echo("  model (eq. 3.3): " + ", ".join(f"{k}={_fmt(getattr(m, k))}" for k in
-                                                 ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")))
+        echo("  model (eq. 3.3): " + ", ".join(f"{k}={_fmt(getattr(m, k))}" for k in BASE_KEYS))
         echo("  poles:  " + "; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.poles()))
         echo("  zeros:  " + ("; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.zeros()) or "none"))
         if r.prior_source:

@@ -99,6 +99,7 @@ def instrument() -> StageClock:
 
 def run_case(case: dict, data: Path = ZOO) -> dict:
     import ident
+    from ident.model import BASE_KEYS
 
     rec = ident.load(data / case["recording"])
     val = ident.load(data / case["validation"])
@@ -117,7 +118,7 @@ def run_case(case: dict, data: Path = ZOO) -> dict:
             "diagnosis_wall_s": r.timings.get("diagnosis", float("nan")),
             "diagnosis_cpu_s": dict(clock.cpu),
             "accepted": {c.effect: c.parameters for c in d.candidates if c.accepted},
-            "model": {k: float(getattr(r.model, k)) for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")},
+            "model": {k: float(getattr(r.model, k)) for k in BASE_KEYS},
             "diagnosis": d.to_dict()}
 
 

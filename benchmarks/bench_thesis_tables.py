@@ -29,11 +29,11 @@ import numpy as np
 import gcode_gen
 import ident
 import virtual_cnc
-from ident.model import DriveModel
+from ident.model import BASE_KEYS, DriveModel
 from virtual_cnc.drive import closed_loop_parameters
 from virtual_cnc.presets import load_machine
 
-KEYS = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
+KEYS = BASE_KEYS
 
 #: The thesis's "Estimated" columns: model parameters (a1 … d1).
 THESIS = {

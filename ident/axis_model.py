@@ -30,11 +30,10 @@ import numpy as np
 from core.effect_limits import check_effect_parameters
 from core.effects import EFFECT_NAMES, MODEL
 from core.errors import InputError
-from ident.model import DriveModel
+from ident.model import BASE_KEYS, DriveModel, base_vector
 
 __all__ = ["AxisModel", "BASE_KEYS", "EFFECT_NAMES", "CONTROLLERS"]
 
-BASE_KEYS = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
 # EFFECT_NAMES (imported above from the effect registry, core.effects, re-exported): the
 # SPEC §7 effects an axis model can carry (external_force is described, never simulated),
 # in the order of the augmented simulator's flag vector.
@@ -119,7 +118,7 @@ class AxisModel:
         from ident.diagnosis.augmented import EFFECTS, N_EP, N_MODES
         from ident.diagnosis.effects import EFFECT_MODELS
 
-        theta = np.array([getattr(self.model, k) for k in BASE_KEYS], dtype=float)
+        theta = base_vector(self.model)
         flags = np.array([1 if e in self.effects else 0 for e in EFFECTS], dtype=np.int64)
         ep = np.zeros(N_EP)
         modes = np.zeros(N_MODES, dtype=np.int64)

@@ -57,6 +57,8 @@ from core.errors import IdentificationError, InputError
 
 __all__ = [
     "DriveModel",
+    "BASE_KEYS",
+    "base_vector",
     "Bounds",
     "CONSTRAINT_NAMES",
     "THETA_NAMES",
@@ -373,6 +375,23 @@ class DriveModel:
             "zeros": [{"freq_hz": _json_float(f), "damping": _json_float(d)} for f, d in self.zeros()],
             "dc_gain": {"tracking": _json_float(track_dc), "disturbance_mm_per_mm_s2": _json_float(dist_dc)},
         }
+
+
+#: The eight parameters of eq. 3.3 in the order every vector of them uses (the fields of
+#: :class:`DriveModel`; the simulator's θ, the uncertainty's columns, the JSON's ``base``).
+BASE_KEYS: tuple[str, ...] = tuple(f.name for f in fields(DriveModel))
+
+
+def base_vector(model: Any) -> np.ndarray:
+    """θ = (a1, a2, a3, b0, b1, b2, d0, d1) of eq. 3.3, (8,), from a DriveModel-like object or a mapping.
+
+    Raises TypeError naming the parameters when one is missing or not a number.
+    """
+    get = model.__getitem__ if isinstance(model, dict) else (lambda k: getattr(model, k))
+    try:
+        return np.array([float(get(k)) for k in BASE_KEYS])
+    except (KeyError, AttributeError, TypeError, ValueError) as exc:
+        raise TypeError(f"model needs the parameters {', '.join(BASE_KEYS)} of eq. 3.3: {exc}") from exc
 
 
 # --------------------------------------------------------------------------------------

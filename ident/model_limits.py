@@ -17,15 +17,13 @@ import math
 import numpy as np
 
 from core.errors import MachineError
-from ident.model import DriveModel
+from ident.model import BASE_KEYS, DriveModel
 
 __all__ = ["check_runnable", "SLOWEST_POLE_HZ"]
 
 #: A closed-loop pole slower than this (a time constant of 160 s) never lets the axis move
 #: within a part program.
 SLOWEST_POLE_HZ = 1e-3
-
-_BASE = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
 
 
 def check_runnable(model: DriveModel, Ts: float, what: str, *, sampled_loop: bool = False) -> None:
@@ -40,7 +38,7 @@ def check_runnable(model: DriveModel, Ts: float, what: str, *, sampled_loop: boo
         Nyquist is an error too.  The identified model is simulated by an exact
         discretisation, which runs such a pole fine.
     """
-    for k in _BASE:
+    for k in BASE_KEYS:
         v = getattr(model, k)
         if not math.isfinite(v):
             raise MachineError(f"{what}: {k} = {v} is not a finite number")

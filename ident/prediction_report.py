@@ -16,6 +16,7 @@ from typing import Sequence
 import numpy as np
 
 from ident.html_page import page, png, pyplot, table, write_html
+from ident.model import BASE_KEYS
 from ident.prediction import Comparison, PredictionSummary
 
 __all__ = ["render_prediction_report", "write_prediction_report"]
@@ -169,7 +170,7 @@ def render_prediction_report(summaries: Sequence[PredictionSummary], comparisons
             continue
         rows = []
         for axis, m in s.prediction.machine.axes.items():
-            base = ", ".join(f"{k} = {getattr(m.model, k):.6g}" for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1"))
+            base = ", ".join(f"{k} = {getattr(m.model, k):.6g}" for k in BASE_KEYS)
             fx = "; ".join(f"{e}: " + ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"
                                               for k, v in p.items()) for e, p in m.effects.items())
             rows.append((axis, base + (f" — effects: {fx}" if fx else "")))

@@ -34,7 +34,7 @@ from core.errors import InputError
 from ident.fixed_order import sum_squares
 from ident.least_squares import bounded_lm
 from ident.metrics import FitResult, fit_result
-from ident.model import Bounds, DriveModel, alphas_from_search
+from ident.model import Bounds, DriveModel, alphas_from_search, base_vector
 from ident.preprocessing import shift_command
 from ident.simulation import DEFAULT_SUBSTEPS, FreeRun, simulate
 
@@ -107,7 +107,7 @@ def _start_point(model, bounds: Bounds, Ts: float, regression=None) -> np.ndarra
     denominator (as eq. 4.9 does for every candidate denominator).
     """
     if not isinstance(model, DriveModel):  # any object with the eight fields
-        model = DriveModel(*(float(getattr(model, k)) for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")))
+        model = DriveModel(*base_vector(model))
     wn, zeta, p = model.search_variables(bounds, Ts)
     f_max = bounds.f_max(Ts)
     wn_c = bounds.wn_min if not math.isfinite(wn) else min(max(wn, bounds.wn_min), f_max)

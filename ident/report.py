@@ -18,6 +18,7 @@ import numpy as np
 from ident.frf_estimate import h1_estimate
 from ident.headline import COHERENT, THESIS, axis_headline, comparison_words, term_notes
 from ident.html_page import page, png, pyplot, table, write_html
+from ident.model import BASE_KEYS
 from ident.results import AxisResult, AxisTraces, IdentifyResult
 
 __all__ = ["write_report", "render_report"]
@@ -301,7 +302,7 @@ def _parameter_table(r: AxisResult) -> str:
     """eq. 3.3's parameters, one row each, with their 95 % interval and mark when the fit gave one."""
     m, u = r.model, r.uncertainty
     rows = []
-    for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1"):
+    for k in BASE_KEYS:
         row = (k, _g(getattr(m, k)))
         if u is not None and k in u.parameters:
             iv = u.parameters[k]

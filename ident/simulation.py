@@ -42,6 +42,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ident.model import base_vector
 from ident.preprocessing import segment_slices
 
 __all__ = ["simulate", "FreeRun", "command_drive", "discretise", "DEFAULT_SUBSTEPS"]
@@ -51,11 +52,8 @@ DEFAULT_SUBSTEPS = 8
 
 
 def _params(model) -> tuple[float, ...]:
-    """The eight parameters of eq. 3.3 from any object with those attributes (DriveModel)."""
-    try:
-        return tuple(float(getattr(model, k)) for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1"))
-    except AttributeError as exc:
-        raise TypeError(f"model needs attributes a1, a2, a3, b0, b1, b2, d0, d1: {exc}") from exc
+    """The eight parameters of eq. 3.3 (:data:`ident.model.BASE_KEYS`) from a DriveModel-like object."""
+    return tuple(base_vector(model))
 
 
 def _gradient(x: np.ndarray, Ts: float) -> np.ndarray:

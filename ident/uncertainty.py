@@ -66,14 +66,14 @@ import numpy as np
 from scipy.special import stdtrit
 
 from ident.gauss_newton import to_stationary_point
-from ident.model import Bounds, DriveModel
+from ident.model import BASE_KEYS, Bounds, DriveModel
 from ident.preprocessing import segment_slices
 
 __all__ = ["PARAMETER_NAMES", "Interval", "RootInterval", "WeakDirection", "Uncertainty",
            "output_error_jacobian", "estimate_uncertainty", "stationary_point", "block_length"]
 
 #: The eight parameters of eq. 3.3, in the order of J's columns.
-PARAMETER_NAMES = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
+PARAMETER_NAMES = BASE_KEYS
 #: The search variables of eq. 3.7, as reported (Hz, -, Hz).
 SEARCH_NAMES = ("wn_hz", "zeta", "p_hz")
 _TWO_PI = 2.0 * math.pi

@@ -20,6 +20,7 @@ from threadpoolctl import threadpool_limits
 import ident
 from core.reader import load_recording
 from core.recording import AxisTrace, Recording
+from ident.model import BASE_KEYS
 
 ROOT = Path(__file__).resolve().parents[1]
 # ../shared/data beside a checkout (or beside the worktrees' directory)
@@ -47,7 +48,7 @@ def outcome(rec: Recording, val: Recording, threads: int) -> dict:
     with threadpool_limits(limits=threads, user_api="blas"):
         r = next(iter(ident.identify(rec, validate=val).axes.values()))
     d = r.diagnosis
-    params = {f"model.{k}": float(getattr(r.model, k)) for k in ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")}
+    params = {f"model.{k}": float(getattr(r.model, k)) for k in BASE_KEYS}
     for c in d.candidates:
         for k, v in c.parameters.items():
             if isinstance(v, float):

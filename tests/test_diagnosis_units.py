@@ -14,6 +14,7 @@ from core.errors import InputError
 from ident.diagnosis import diagnose
 from ident.diagnosis.augmented import EP_INDEX, N_EP, segment_starts, simulate_augmented
 from ident.diagnosis.candidates import ModelSpec, fit_spec, make_chunk, sse
+from ident.model import BASE_KEYS
 from ident.diagnosis.config import DEFAULT
 from ident.diagnosis.residuals import localise, position_periodogram, reversal_times, whiteness, worst_windows
 
@@ -189,7 +190,7 @@ def test_localise_concentrates_a_reversal_residual_after_reversals(x_r):
     ],
 )
 def test_bad_input_gives_a_one_line_error(x_r, kwargs, match):
-    args = {"x_r": x_r, "x": x_r.copy(), "Ts": Ts, "model": dict(zip(("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1"), THETA))}
+    args = {"x_r": x_r, "x": x_r.copy(), "Ts": Ts, "model": dict(zip(BASE_KEYS, THETA))}
     args.update(kwargs)
     with pytest.raises(InputError, match=match) as exc:
         diagnose(args.pop("x_r"), args.pop("x"), args.pop("Ts"), args.pop("model"))
@@ -203,7 +204,7 @@ def _recording(seed: int, effects: dict[str, float] | None = None, modes=(0, 0, 
     return x_r, x
 
 
-MODEL = dict(zip(("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1"), THETA))
+MODEL = dict(zip(BASE_KEYS, THETA))
 
 
 def test_clean_model_data_give_none_and_a_complete_json():

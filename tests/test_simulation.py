@@ -140,3 +140,15 @@ def test_bad_arguments_are_rejected():
         simulate(m, np.zeros(10), 0.0)
     with pytest.raises(TypeError, match="a1, a2"):
         simulate(object(), np.zeros(10), TS)
+
+
+def test_a_load_enters_where_the_command_drive_does():
+    # a constant extra acceleration w on a loop with integral action: the same response as
+    # the command drive raised by w (the integral then takes it up, no lasting offset)
+    m = thesis_model(d0=0.0, d1=0.0)
+    t = np.arange(0, 3.0, TS)
+    x_r = np.where(t < 0.5, 20 * t, 10.0)
+    w = np.where(t > 1.0, 500.0, 0.0)
+    moved = simulate(m, x_r, TS, disturbance=w) - simulate(m, x_r, TS)
+    assert moved[t > 1.0][50] > 0.0  # pushed the way the load pushes
+    assert abs(moved[-1]) < 0.02 * np.max(np.abs(moved))

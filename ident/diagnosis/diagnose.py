@@ -58,10 +58,9 @@ from ident.diagnosis.intervals import at_bound, effect_intervals
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, simulate_spec, sse
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
+from ident.model import BASE_KEYS, base_vector
 
 __all__ = ["Candidate", "Diagnosis", "diagnose"]
-
-_BASE_KEYS = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
 
 
 @dataclass(frozen=True)
@@ -162,15 +161,10 @@ def _jsonable(obj: Any) -> Any:
 
 
 def _theta(model: Any) -> np.ndarray:
-    if isinstance(model, dict):
-        get = model.__getitem__
-    else:
-        def get(k: str) -> Any:
-            return getattr(model, k)
     try:
-        th = np.array([float(get(k)) for k in _BASE_KEYS])
-    except (KeyError, AttributeError, TypeError, ValueError) as exc:
-        raise InputError(f"model must carry the parameters {', '.join(_BASE_KEYS)} of eq. 3.3: {exc}") from exc
+        th = base_vector(model)
+    except TypeError as exc:
+        raise InputError(str(exc)) from exc
     if not np.all(np.isfinite(th)):
         raise InputError(f"model parameters must be finite, got {th.tolist()}")
     return th
@@ -907,7 +901,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
             "validation_x_hat_before": simulate_spec(base_sc.specs[0], te),
             "validation_x_hat_after": simulate_spec(current_sc.specs[0], te),
         })
-    aug = {"base": dict(zip(_BASE_KEYS, map(float, final.theta))),
+    aug = {"base": dict(zip(BASE_KEYS, map(float, final.theta))),
            "effects": {e: effect_parameters(final, e, Ts) for e in accepted},
            "controller": CONTROLLERS[int(final.modes[4])],
            "held_out": scheme}
@@ -1001,7 +995,7 @@ def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance
         (full, disturbance, "identification")
     if not analysis or not analysis.get("time_localised"):
         return None
-    model = dict(zip(_BASE_KEYS, map(float, base.theta)))
+    model = dict(zip(BASE_KEYS, map(float, base.theta)))
     from ident.model import DriveModel
 
     dm = DriveModel(**model)

@@ -24,6 +24,7 @@ from typing import Mapping
 import numpy as np
 
 from core.errors import InputError
+from ident.model import BASE_KEYS
 from ident.tuning.loop import Timing
 
 __all__ = ["CONTROLLER_FORMS", "Gains", "closed_loop", "coefficient_rows", "TIMINGS"]
@@ -122,7 +123,7 @@ def closed_loop(gains: Gains, kj: float, bj: float) -> dict[str, float]:
     """
     A, c = coefficient_rows(gains)
     theta = np.array([kj, bj])
-    return {k: float(A[i] @ theta + c[i]) for i, k in enumerate(("a1", "a2", "a3", "b0", "b1", "b2"))}
+    return {k: float(A[i] @ theta + c[i]) for i, k in enumerate(BASE_KEYS[:6])}
 
 
 def coefficient_rows(gains: Gains) -> tuple[np.ndarray, np.ndarray]:
