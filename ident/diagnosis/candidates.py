@@ -51,7 +51,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
            "sampled_base", "refit_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
-           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "polish",
+           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "shoot",
+           "polish",
            "segment_variance_fit"]
 
 
@@ -250,8 +251,8 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
         if r == len(cfg.race_fidelity) - 1 or len(alive) == 1:
             break
         alive = [alive[i] for i in _best_per_variant(alive, costs, max(cfg.joint_starts, len(alive) // 2))]
-    # 4. polish the winner on the whole chunk
-    best = polish(alive[int(np.argmin(costs))], chunk, cfg)
+    # 4. polish the winner on the whole chunk, from its multiple-shooting fit when asked
+    best = polish(shoot(alive[int(np.argmin(costs))], chunk, cfg), chunk, cfg)
     return EFFECT_MODELS[effect].finish(best, chunk, cfg)
 
 
@@ -267,6 +268,24 @@ def race_part(chunk: Chunk, frac: float, cfg: DiagnosisConfig) -> Chunk:
     if 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts:
         return chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
     return chunk.part(frac)
+
+
+def shoot(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
+    """``spec`` fitted by multiple shooting: on every scored sample of ``chunk`` in windows of
+    ``cfg.shooting_window_s``, each simulated from the recorded state
+    (:meth:`Chunk.shots <ident.diagnosis.spec.Chunk.shots>`), ``cfg.shooting_iter``
+    iterations of :func:`fit_spec` at the coarse difference step.
+
+    The output-error cost of eq. 3.6 summed over short windows instead of whole segments:
+    the error cannot drift in phase over a window, so the cost is smooth where the free
+    run's ripples (a lightly damped mode, stick-slip) and a local solve from the race's
+    winner reaches the valley the free-run polish (:func:`polish`) then refines.  Returns
+    ``spec`` itself when shooting is off (``shooting_window_s`` 0).
+    """
+    if cfg.shooting_window_s <= 0 or cfg.shooting_iter <= 0:
+        return spec
+    return fit_spec(spec, chunk.shots(cfg.shooting_window_s, cfg.shooting_lead_s), max_iter=cfg.shooting_iter,
+                    fd_step=cfg.fd_step_rough, polish=False, search=True, cfg=cfg)
 
 
 def polish(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:

@@ -144,6 +144,64 @@ class Chunk:
             starts[r] = True
         return self._take(keep, starts, score, (warm, vw, aw))
 
+    def shots(self, window_s: float, lead_s: float = 0.1) -> "Chunk":
+        """Every scored sample of the chunk in short windows, each simulated from the recorded
+        state: the chunk of a multiple-shooting fit (Ribeiro et al., Automatica 2020).
+
+        Every segment is cut into consecutive windows of about ``window_s`` (a tail shorter
+        than half a window joins the one before).  The first window of a segment starts
+        where the segment does (at rest, or warm where the chunk itself restarts warm); every
+        other one restarts the simulation mid-move on the recorded position, velocity and
+        acceleration between ``lead_s`` and twice that before its first sample, where
+        :func:`_restart_state` reads them best, and that lead-in is not scored: what the
+        restart cannot know (a mode's phase and deflection, a delay's history, an integral
+        wound up in saturation) settles there.  Lead-ins repeat samples the window before
+        scores, so every scored sample of the chunk is scored once.  A model's error then
+        grows over one window only, never over a whole segment.
+        """
+        L = max(int(round(window_s / self.Ts)), 1)
+        lead = int(round(lead_s / self.Ts))
+        seg_starts = np.flatnonzero(self.starts)
+        seg_ends = np.append(seg_starts[1:], self.n)
+        idx, starts, score, warm, vw, aw = [], [], [], [], [], []
+        # mid-move: the command moves at every sample the restart's parabola is read from
+        # (at the end of a move the table may already rest in its gap or stick)
+        still = np.convolve(self.derivs[0] == 0.0, np.ones(2 * _HALF + 1), mode="same")
+        moving = still == 0.0
+        for lo, hi in zip(seg_starts.tolist(), seg_ends.tolist()):
+            a = lo
+            while a < hi:
+                b = hi if hi - (a + L) < L // 2 else a + L
+                r, w0, v0, a0 = lo, False, 0.0, 0.0
+                if self.warm is not None:
+                    w0, v0, a0 = bool(self.warm[0][lo]), float(self.warm[1][lo]), float(self.warm[2][lo])
+                at = _moving_restart(moving, lo + _HALF, a - lead, lead) if a > lo else None
+                if at is not None:
+                    r, v0, a0 = _restart_state(self.x, self.derivs[0], *at, self.Ts, moving)
+                    w0 = True
+                elif a > lo:  # nothing moves between the segment's start and the window: restart there
+                    r = lo
+                k = np.arange(r, b)
+                idx.append(k)
+                st = np.zeros(k.size, dtype=bool)
+                st[0] = True
+                starts.append(st)
+                sc = self.score[k].copy()
+                sc[: a - r] = False  # the lead-in is not scored
+                score.append(sc)
+                wm = np.zeros(k.size, dtype=bool)
+                wm[0] = w0
+                warm.append(wm)
+                vv, aa = np.zeros(k.size), np.zeros(k.size)
+                vv[0], aa[0] = v0, a0
+                vw.append(vv)
+                aw.append(aa)
+                a = b
+        i = np.concatenate(idx)
+        return Chunk(self.x_r[i], self.x[i], self.Ts, np.concatenate(starts),
+                     (self.derivs[0][i], self.derivs[1][i]), self.w[i], np.concatenate(score),
+                     (np.concatenate(warm), np.concatenate(vw), np.concatenate(aw)))
+
     def _take(self, keep: np.ndarray, starts: np.ndarray, score: np.ndarray,
               warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> "Chunk":
         """The samples of ``keep`` with the given starts, scored samples and warm restarts."""
@@ -156,14 +214,32 @@ class Chunk:
 _HALF = 5
 
 
-def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float) -> tuple[int, float, float]:
+def _moving_restart(moving: np.ndarray, lo: int, hi: int, lead: int) -> tuple[int, int] | None:
+    """The span [hi − lead, hi] to restart in (:func:`_restart_state`) when the command moves
+    there (``moving``, a mask of samples); else the ``lead`` samples up to the last sample in [lo, hi] where it moves, so
+    a window after a dwell restarts on the move before it (at rest the side of a gap the
+    table rests on and the force friction holds are not known).  None when the command
+    does not move in [lo, hi].
+    """
+    if hi < lo:
+        return None
+    where = np.flatnonzero(moving[lo : hi + 1])
+    if where.size == 0:
+        return None
+    last = lo + int(where[-1])
+    return max(last - lead, lo), last
+
+
+def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float,
+                   moving: np.ndarray | None = None) -> tuple[int, float, float]:
     """The sample in [lo, hi] where the recorded position ``x`` is closest to a parabola over
     the ``_HALF`` samples either side (the acceleration steady: no switch of the command's
     jerk, no reversal inside), while the command moves (``v_r`` ≠ 0: at rest the side of a
     gap the table rests on is not known) where it does, with the parabola's slope and
     curvature there (mm/s, mm/s²): a least-squares fit averages the encoder's quantization
     and noise that plain differences would amplify.  ``x`` must hold ``_HALF`` samples
-    either side of [lo, hi].
+    either side of [lo, hi].  ``moving``: the samples that count as moving (default
+    ``v_r`` ≠ 0).
     """
     t = np.arange(-_HALF, _HALF + 1) * Ts
     V = np.vander(t, 3)  # columns t², t, 1
@@ -172,7 +248,7 @@ def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float) 
     X = x[idx]
     C = X @ P.T
     misfit = np.sum((X - C @ V.T) ** 2, axis=1)
-    moving = v_r[lo : hi + 1] != 0.0
+    moving = v_r[lo : hi + 1] != 0.0 if moving is None else moving[lo : hi + 1]
     if moving.any():
         misfit[~moving] = np.inf
     k = int(np.argmin(misfit))
