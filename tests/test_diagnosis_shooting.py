@@ -64,3 +64,21 @@ def test_a_multiple_shooting_fit_finds_the_stribeck_curve_of_the_drive_that_reco
     assert np.allclose(p, [2.0, 2.0], rtol=0.05)
     assert sse(fit, chunk) < 0.01 * sse(start, chunk)  # and so the free run of the whole recording
     assert shoot(start, chunk, DEFAULT) is start  # off by default: the race's winner goes to the polish as it is
+
+
+def test_with_shooting_on_a_mode_is_named_and_its_held_out_windows_figure_is_told_beside_the_free_run():
+    from ident.diagnosis import diagnose
+    from test_diagnosis_units import MODEL
+    from test_diagnosis_verdicts import _mode_recording
+
+    x_r, x = _mode_recording(41, 40.0)
+    v_r, v = _mode_recording(42, 40.0)
+    on = dataclasses.replace(DEFAULT, shooting_window_s=0.3)
+    d = diagnose(x_r, x, Ts, MODEL, validation=(v_r, v, None), effects=("resonance",), config=on)
+    assert d.verdict == "resonance", d.summary
+    c = next(c for c in d.candidates if c.accepted)
+    assert abs(c.parameters["freq_hz"] / 40.0 - 1.0) < 0.02
+    # the free-run figure judges; the k-step-ahead one (windows from the recorded state) is told beside it
+    assert c.score["held_out_windows_s"] == 0.3
+    assert 0.0 < c.score["held_out_windows_residual_reduction"] <= 1.0
+    assert c.score["held_out_residual_reduction"] > DEFAULT.min_relevant
