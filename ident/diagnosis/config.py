@@ -148,7 +148,14 @@ class DiagnosisConfig:
     #: and the simulation-error cost ripples (Ribeiro et al., Automatica 2020): a mode's
     #: fit escapes to high damping, a friction fit to another valley.  Over a window a few
     #: periods of the slowest mode long (0.1–0.5 s) the error cannot drift far and the
-    #: cost is smooth.  0: off (the polish starts from the race's winner).
+    #: cost is smooth.  0: off (the polish starts from the race's winner).  Off because it
+    #: names nothing more: with 0.3 s, drive-zoo-dev2 20/28 as without it (the same hits,
+    #: main parameters within 2 points; the 73 Hz mode case → none instead of → time_delay),
+    #: drive-zoo-dev 19/21 against 21/21 (two dead times get a resonance beside them), at
+    #: 1.10× the CPU (bench_diagnosis_speed.py --compare).  The misses it was meant for are
+    #: no ripple: over the windows the modes' costs are those of the free run
+    #: (bench_shooting_profile.py), and the missed Stribeck and saturation fits predict the
+    #: held-out windows no better than the base.
     shooting_window_s: float = 0.0
     #: … each window restarting between this long and twice this long before its first
     #: scored sample (the lead-in, unscored, where a mode's phase and a delay's history settle) …
