@@ -43,7 +43,8 @@ import numpy as np
 from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS, simulate_augmented, simulate_augmented_many
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, cascade_motor_share, effect_parameters
-from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, sim_substeps, simulate_spec, sse
+from ident.diagnosis.spec import (Chunk, ModelSpec, estimated_states, make_chunk, residual, restart_responses,
+                                  sim_substeps, simulate_spec, sse)
 from ident.least_squares import bounded_lm, secant_lm
 
 if TYPE_CHECKING:
@@ -143,6 +144,10 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
             ep[idx] = z[nb:] * s_ep
         return th, ep
 
+    # multiple-shooting windows: the restart states are estimated per window along the
+    # responses of the start's model (held through the fit: they barely move with it)
+    cols = restart_responses(spec, chunk)
+
     def weighted(y: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
             r = w * (y[sel] - x_m)
@@ -152,8 +157,9 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
     def resid(z: np.ndarray) -> np.ndarray:
         th, ep = unpack(z)
-        return weighted(simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
-                                           starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm))
+        r = weighted(simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
+                                        starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm))
+        return estimated_states(r, spec.effects, ep, spec.modes, chunk, cols)
 
     def resid_many(Z: np.ndarray) -> np.ndarray:  # row p is resid(Z[p]), bit for bit
         sets = [unpack(z) for z in Z]
@@ -162,9 +168,10 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
                                     starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
         with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
             R = w * (Y[:, sel] - x_m)  # element by element as weighted() does
-            for r in R:
+            for r, (_, ep) in zip(R, sets):
                 if not np.isfinite(r @ r):
                     r[:] = 1e3
+                r[:] = estimated_states(r, spec.effects, ep, spec.modes, chunk, cols)
         return R
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected

@@ -7,7 +7,7 @@ weighted output-error cost of eq. 3.6 (:func:`residual`, :func:`sse`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,6 +47,9 @@ class Chunk:
     #: segment starts that restart mid-move and the recorded velocity and acceleration
     #: there, (mask, v, a) (:meth:`windows`; ``simulate_augmented(warm=)``)
     warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: multiple-shooting windows (:meth:`shots`): the state each warm restart misreads is
+    #: estimated per window (:func:`estimated_states`)
+    estimate_states: bool = False
 
     @property
     def n(self) -> int:
@@ -54,7 +57,7 @@ class Chunk:
 
     def scored(self, mask: np.ndarray) -> "Chunk":
         """The same samples with only ``mask`` (and not the restart transients) scored."""
-        return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, self.w, self.score & mask, self.warm)
+        return replace(self, score=self.score & mask)
 
     def reweighted(self, r: np.ndarray) -> "Chunk":
         """The same samples weighted by a variance of each segment's own: ``w = σ/σ_seg``,
@@ -74,7 +77,7 @@ class Chunk:
             m = sc[a:b]
             s_seg = math.sqrt(float(np.mean(r[a:b][m] ** 2))) if np.any(m) else sigma
             w[a:b] = sigma / max(s_seg, 1e-3 * sigma)
-        return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, w, self.score, self.warm)
+        return replace(self, w=w)
 
     def part(self, frac: float) -> "Chunk":
         """The first part of every segment holding ``frac`` of its scored samples (a cheaper
@@ -200,7 +203,7 @@ class Chunk:
         i = np.concatenate(idx)
         return Chunk(self.x_r[i], self.x[i], self.Ts, np.concatenate(starts),
                      (self.derivs[0][i], self.derivs[1][i]), self.w[i], np.concatenate(score),
-                     (np.concatenate(warm), np.concatenate(vw), np.concatenate(aw)))
+                     (np.concatenate(warm), np.concatenate(vw), np.concatenate(aw)), estimate_states=True)
 
     def _take(self, keep: np.ndarray, starts: np.ndarray, score: np.ndarray,
               warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> "Chunk":
@@ -342,9 +345,83 @@ def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None) -> np.
 
 
 def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> np.ndarray:
-    """Weighted free-run residual w·(x̂ − x) on ``mask`` (default the scored samples), mm."""
+    """Weighted free-run residual w·(x̂ − x) on ``mask`` (default the scored samples), mm;
+    on multiple-shooting windows with the restart states estimated (:func:`estimated_states`)."""
     m = chunk.score if mask is None else mask
-    return chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
+    r = chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
+    return estimated_states(r, spec.effects, spec.ep, spec.modes, chunk, restart_responses(spec, chunk, m), m)
+
+
+#: Offsets of a restart's position (mm), velocity (mm/s) and acceleration (mm/s²) whose
+#: responses :func:`restart_responses` differences: small against what a drive moves, large
+#: against rounding.
+_RESTART_STEPS = (1e-4, 1e-2, 1.0)
+
+
+def restart_responses(spec: ModelSpec, chunk: Chunk, m: np.ndarray | None = None) -> list[np.ndarray] | None:
+    """The weighted responses of ``spec``'s simulation on ``chunk``'s samples ``m`` (default
+    the scored ones) to an offset of every warm restart's position, velocity and
+    acceleration (per unit of ``_RESTART_STEPS``, forward differences): the directions a
+    window's error takes when the restart misreads the state — the position, the velocity,
+    the integral holding the acceleration.  None unless ``chunk`` estimates its restart
+    states (:meth:`Chunk.shots`).
+    """
+    if not chunk.estimate_states or chunk.warm is None:
+        return None
+    m = chunk.score if m is None else m
+    on, v, a = chunk.warm
+    y = simulate_spec(spec, chunk)
+    cols = []
+    for i, h in enumerate(_RESTART_STEPS):
+        moved = replace(chunk, x=chunk.x + h * on) if i == 0 else replace(
+            chunk, warm=(on, v + h * on, a) if i == 1 else (on, v, a + h * on))
+        cols.append(chunk.w[m] * (simulate_spec(spec, moved)[m] - y[m]))
+    return cols
+
+
+def estimated_states(r: np.ndarray, effects: tuple[str, ...], ep: np.ndarray, modes: np.ndarray, chunk: Chunk,
+                     cols: list[np.ndarray] | None, m: np.ndarray | None = None) -> np.ndarray:
+    """``r`` (weighted residuals of ``chunk``'s samples ``m``, default the scored ones) with
+    every warm window's initial state estimated: the initial states of multiple shooting.
+
+    A restart mid-move reads position, velocity and acceleration from the recording and
+    settles the rest; what it misreads adds to the window's output, to first order, as a
+    combination of ``cols`` (:func:`restart_responses`) and — for a mode on the recorded
+    position (``resonance``, output filter, restarted undeflected) — of its free response
+    e^(−ζωt)·(A cos ω_d t + B sin ω_d t), t from the restart.  The combination of every
+    window is estimated by least squares and removed (variable projection: the states are
+    eliminated, not fitted as parameters).  Windows restarted at rest keep their state.
+    Returns ``r`` itself on other chunks.
+    """
+    if cols is None or not chunk.estimate_states or chunk.warm is None:
+        return r
+    m = chunk.score if m is None else m
+    win = np.cumsum(chunk.starts) - 1  # window of each sample
+    first = np.flatnonzero(chunk.starts)
+    warm_win = chunk.warm[0][first]
+    basis = list(cols)
+    if "resonance" in effects and int(modes[MODE_SLOTS["resonance"]]) == 0:
+        f, zeta = float(ep[EP_INDEX["freq_hz"]]), float(ep[EP_INDEX["damping"]])
+        if f > 0.0 and 0.0 <= zeta < 1.0:
+            t = (np.arange(chunk.n) - first[win]) * chunk.Ts
+            om = 2.0 * math.pi * f
+            env = chunk.w * np.exp(-zeta * om * t)
+            wd = om * math.sqrt(1.0 - zeta * zeta)
+            basis += [(env * np.cos(wd * t))[m], (env * np.sin(wd * t))[m]]
+    k = win[m]
+    live = warm_win[k]
+    B = np.stack([np.where(live, b, 0.0) for b in basis], axis=1)  # (samples, columns)
+    if not (np.all(np.isfinite(B)) and np.all(np.isfinite(r))):
+        return r
+    nw, nc = first.size, B.shape[1]
+    G = np.zeros((nw, nc, nc))
+    h = np.zeros((nw, nc))
+    for i in range(nc):
+        h[:, i] = np.bincount(k, weights=B[:, i] * r, minlength=nw)
+        for j in range(i, nc):
+            G[:, i, j] = G[:, j, i] = np.bincount(k, weights=B[:, i] * B[:, j], minlength=nw)
+    coef = np.einsum("wij,wj->wi", np.linalg.pinv(G, rcond=1e-10, hermitian=True), h)
+    return r - np.einsum("si,si->s", B, coef[k])
 
 
 def sse(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> float:
