@@ -148,17 +148,19 @@ class DiagnosisConfig:
     #: and the simulation-error cost ripples (Ribeiro et al., Automatica 2020): a mode's
     #: fit escapes to high damping, a friction fit to another valley.  Over a window a few
     #: periods of the slowest mode long (0.1–0.5 s) the error cannot drift far and the
-    #: cost is smooth.  0: off (the polish starts from the race's winner).  Off because it
-    #: names nothing more: with 0.3 s, drive-zoo-dev2 20/28 as without it (the same hits,
-    #: main parameters within 2 points; the 73 Hz mode case → none instead of → time_delay),
-    #: drive-zoo-dev 19/21 against 21/21 (two dead times get a resonance beside them), at
-    #: 1.10× the CPU (bench_diagnosis_speed.py --compare).  The misses it was meant for are
-    #: no ripple: over the windows the modes' costs are those of the free run
-    #: (bench_shooting_profile.py), and the missed Stribeck and saturation fits predict the
-    #: held-out windows no better than the base.
+    #: cost is smooth.  Each window's initial state is estimated (spec.estimated_states).
+    #: 0: off (the polish starts from the race's winner).  Off because it names nothing
+    #: more: with 0.3 s, drive-zoo-dev2 20/28 as without it (the same hits, main
+    #: parameters within 3 points; the 73 Hz mode case → none instead of → time_delay),
+    #: drive-zoo-dev 20/21 against 21/21 (a dead time gets a resonance beside it), at 1.30×
+    #: the CPU (bench_diagnosis_speed.py --compare).  The misses it was meant for are no
+    #: ripple: over the windows a lightly damped mode still costs 2–4× the fit on the
+    #: damping bound (bench_shooting_profile.py); a missed Stribeck curve predicts the
+    #: held-out windows better (case_006: 5 %) but drifts in free run, which judges.
     shooting_window_s: float = 0.0
     #: … each window restarting between this long and twice this long before its first
-    #: scored sample (the lead-in, unscored, where a mode's phase and a delay's history settle) …
+    #: scored sample (the lead-in, unscored, where a delay's history and what the estimated
+    #: states leave — the side of a gap, stick or slip — settle) …
     shooting_lead_s: float = 0.1
     #: … fitted for this many iterations (coarse difference step) before the polish.
     shooting_iter: int = 10
