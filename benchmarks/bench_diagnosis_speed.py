@@ -15,6 +15,11 @@ nothing else is changed.  ``--json OUT`` writes the verdicts, the accepted param
 the diagnosis JSON of every case (to compare results before and after a change).
 
     python benchmarks/bench_diagnosis_speed.py [--cases case_000,case_001] [--data DIR] [--json OUT]
+        [--config JSON] [--compare JSON]
+
+``--config``: tunables changed for the run (as bench_drive_zoo.py's); ``--compare``: every
+case is run a second time, right after, with these tunables instead, and the ratio of the
+medians (compare / config) printed: the two measured in one run, under the same load.
 
 ``--data``: another labelled set of the same layout (``labels.json``), e.g. drive-zoo-dev.
 """
@@ -34,6 +39,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 ZOO = ROOT.parent / "shared" / "data" / "drive-zoo-dev2"
 sys.path.insert(0, str(ROOT))
+from benchmarks.diagnosis_config_arg import CONFIG_HELP  # noqa: E402
 
 #: One effect case of each class (the first of each in labels.json).
 DEFAULT_CASES = ("case_000", "case_001", "case_002", "case_003", "case_004", "case_006")
@@ -97,8 +103,9 @@ def instrument() -> StageClock:
     return clock
 
 
-def run_case(case: dict, data: Path = ZOO) -> dict:
+def run_case(case: dict, data: Path = ZOO, config: str = "{}") -> dict:
     import ident
+    from benchmarks.diagnosis_config_arg import diagnosis_config
     from ident.model import BASE_KEYS
 
     rec = ident.load(data / case["recording"])
@@ -106,7 +113,7 @@ def run_case(case: dict, data: Path = ZOO) -> dict:
     clock = instrument()
     try:
         c0, t0 = time.process_time(), time.perf_counter()
-        res = ident.identify(rec, validate=val)
+        res = ident.identify(rec, validate=val, diagnosis_config=diagnosis_config(config))
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     finally:
         clock.restore()
@@ -127,6 +134,8 @@ def main() -> None:
     ap.add_argument("--cases", default=",".join(DEFAULT_CASES))
     ap.add_argument("--data", default=str(ZOO), help="a labelled set of recordings (default drive-zoo-dev2)")
     ap.add_argument("--json", default="", help="write every case's verdict, parameters and diagnosis here")
+    ap.add_argument("--config", default="{}", help=CONFIG_HELP)
+    ap.add_argument("--compare", default="", help="run every case again with these tunables (JSON) and print the ratio")
     args = ap.parse_args()
     data = Path(args.data)
     if not (data / "labels.json").exists():
@@ -141,19 +150,30 @@ def main() -> None:
     first = cases[wanted[0]]
     # warm-up, untimed: imports and numba's cached machine code, for the diagnosis too
     ident.identify(ident.load(data / first["recording"]), validate=ident.load(data / first["validation"]))
-    rows = []
-    for w in wanted:
-        row = run_case(cases[w], data)
-        rows.append(row)
+    rows, other = [], []
+
+    def show(row: dict) -> None:
         idf = ", ".join(f"{k} {v:.2f}" for k, v in row["identify_wall_s"].items())
         print(f"{row['case']}  {row['truth']:13s} -> {row['verdict']:24s} wall {row['wall_s']:5.2f} s  "
               f"cpu {row['cpu_s']:5.2f} s  (identify, wall: {idf}; diagnosis wall {row['diagnosis_wall_s']:.2f})")
         stages = sorted(row["diagnosis_cpu_s"].items(), key=lambda kv: -kv[1])
         print("    diagnosis cpu: " + ", ".join(f"{k} {v:.2f}" for k, v in stages)
               + f"; sum {sum(row['diagnosis_cpu_s'].values()):.2f} s", flush=True)
+
+    for w in wanted:
+        rows.append(run_case(cases[w], data, args.config))
+        show(rows[-1])
+        if args.compare:
+            other.append(run_case(cases[w], data, args.compare))
+            print(f"  with {args.compare}:")
+            show(other[-1])
     print(f"median over {len(rows)} effect cases: wall {statistics.median(r['wall_s'] for r in rows):.2f} s, "
           f"cpu {statistics.median(r['cpu_s'] for r in rows):.2f} s "
           f"(max wall {max(r['wall_s'] for r in rows):.2f} s)")
+    if other:
+        med = {k: [statistics.median(r[k] for r in rs) for rs in (rows, other)] for k in ("wall_s", "cpu_s")}
+        print(f"with {args.compare}: median wall {med['wall_s'][1]:.2f} s, cpu {med['cpu_s'][1]:.2f} s; ratio "
+              f"wall {med['wall_s'][1] / med['wall_s'][0]:.2f}, cpu {med['cpu_s'][1] / med['cpu_s'][0]:.2f}")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1, default=float))
 

@@ -43,7 +43,8 @@ import numpy as np
 from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS, simulate_augmented, simulate_augmented_many
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, cascade_motor_share, effect_parameters
-from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, sim_substeps, simulate_spec, sse
+from ident.diagnosis.spec import (Chunk, ModelSpec, estimated_states, make_chunk, residual, restart_responses,
+                                  sim_substeps, simulate_spec, sse)
 from ident.least_squares import bounded_lm, secant_lm
 
 if TYPE_CHECKING:
@@ -51,7 +52,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
            "sampled_base", "refit_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
-           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "polish",
+           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "shoot",
+           "polish",
            "segment_variance_fit"]
 
 
@@ -142,6 +144,10 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
             ep[idx] = z[nb:] * s_ep
         return th, ep
 
+    # multiple-shooting windows: the restart states are estimated per window along the
+    # responses of the start's model (held through the fit: they barely move with it)
+    cols = restart_responses(spec, chunk)
+
     def weighted(y: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
             r = w * (y[sel] - x_m)
@@ -151,8 +157,9 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
     def resid(z: np.ndarray) -> np.ndarray:
         th, ep = unpack(z)
-        return weighted(simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
-                                           starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm))
+        r = weighted(simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
+                                        starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm))
+        return estimated_states(r, spec.effects, ep, spec.modes, chunk, cols)
 
     def resid_many(Z: np.ndarray) -> np.ndarray:  # row p is resid(Z[p]), bit for bit
         sets = [unpack(z) for z in Z]
@@ -161,9 +168,10 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
                                     starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
         with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
             R = w * (Y[:, sel] - x_m)  # element by element as weighted() does
-            for r in R:
+            for r, (_, ep) in zip(R, sets):
                 if not np.isfinite(r @ r):
                     r[:] = 1e3
+                r[:] = estimated_states(r, spec.effects, ep, spec.modes, chunk, cols)
         return R
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
@@ -250,8 +258,8 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
         if r == len(cfg.race_fidelity) - 1 or len(alive) == 1:
             break
         alive = [alive[i] for i in _best_per_variant(alive, costs, max(cfg.joint_starts, len(alive) // 2))]
-    # 4. polish the winner on the whole chunk
-    best = polish(alive[int(np.argmin(costs))], chunk, cfg)
+    # 4. polish the winner on the whole chunk, from its multiple-shooting fit when asked
+    best = polish(shoot(alive[int(np.argmin(costs))], chunk, cfg), chunk, cfg)
     return EFFECT_MODELS[effect].finish(best, chunk, cfg)
 
 
@@ -267,6 +275,24 @@ def race_part(chunk: Chunk, frac: float, cfg: DiagnosisConfig) -> Chunk:
     if 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts:
         return chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
     return chunk.part(frac)
+
+
+def shoot(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
+    """``spec`` fitted by multiple shooting: on every scored sample of ``chunk`` in windows of
+    ``cfg.shooting_window_s``, each simulated from the recorded state
+    (:meth:`Chunk.shots <ident.diagnosis.spec.Chunk.shots>`), ``cfg.shooting_iter``
+    iterations of :func:`fit_spec` at the coarse difference step.
+
+    The output-error cost of eq. 3.6 summed over short windows instead of whole segments:
+    the error cannot drift in phase over a window, so the cost is smooth where the free
+    run's ripples (a lightly damped mode, stick-slip) and a local solve from the race's
+    winner reaches the valley the free-run polish (:func:`polish`) then refines.  Returns
+    ``spec`` itself when shooting is off (``shooting_window_s`` 0).
+    """
+    if cfg.shooting_window_s <= 0 or cfg.shooting_iter <= 0:
+        return spec
+    return fit_spec(spec, chunk.shots(cfg.shooting_window_s, cfg.shooting_lead_s), max_iter=cfg.shooting_iter,
+                    fd_step=cfg.fd_step_rough, polish=False, search=True, cfg=cfg)
 
 
 def polish(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:

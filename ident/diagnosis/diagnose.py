@@ -730,6 +730,19 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     def fit_of(sc: _Scored) -> float:
         return _fit_pct(e_test, np.concatenate(sc.raw_r))
 
+    # with multiple shooting on, each candidate is also scored on the held-out data in its
+    # windows, each simulated from the recorded state (k-step-ahead): told beside the
+    # free-run figure, which alone judges
+    shots = ([te.shots(cfg.shooting_window_s, cfg.shooting_lead_s) for _, te in folds]
+             if cfg.shooting_window_s > 0 else [])
+
+    def with_shots(ev: dict, sc: _Scored, ref: _Scored) -> dict:
+        if not shots:
+            return ev
+        new, old = (sum(sse(s, sh) for s, sh in zip(x.specs, shots)) for x in (sc, ref))
+        return {**ev, "held_out_windows_s": cfg.shooting_window_s,
+                "held_out_windows_residual_reduction": 1.0 - math.sqrt(new / old) if old > 0 else math.nan}
+
     if validation is not None:  # the training data are all the data: base is fitted already
         base_sc = scored([base])
     else:
@@ -784,7 +797,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         if ok and rank > best_gain:
             best_name, best_gain = eff, rank
         candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
-                                     sigs, [], why, base_sc.raw_rms, ev, Ts=Ts, chunk=full, cfg=cfg))
+                                     sigs, [], why, base_sc.raw_rms, with_shots(ev, sc, base_sc), Ts=Ts, chunk=full,
+                                     cfg=cfg))
     # 4. greedy forward selection: the best single effect, then a second on top of it
     chosen_first = best_name  # by the forward step, whatever order the verdict names them in
     if best_name is not None:
@@ -821,8 +835,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
                 best2, best2_gain, best2_sc = eff, ev["minus_log10_p"], sc
         for eff, sc, gain, folds_ok, ok, why, ev in round2:
             candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
-                                         cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms, ev,
-                                         Ts=Ts, chunk=full, cfg=cfg))
+                                         cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms,
+                                         with_shots(ev, sc, current_sc), Ts=Ts, chunk=full, cfg=cfg))
         if best2 is not None:
             accepted.append(best2)
             current_sc = best2_sc

@@ -7,7 +7,7 @@ weighted output-error cost of eq. 3.6 (:func:`residual`, :func:`sse`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,6 +47,9 @@ class Chunk:
     #: segment starts that restart mid-move and the recorded velocity and acceleration
     #: there, (mask, v, a) (:meth:`windows`; ``simulate_augmented(warm=)``)
     warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    #: multiple-shooting windows (:meth:`shots`): the state each warm restart misreads is
+    #: estimated per window (:func:`estimated_states`)
+    estimate_states: bool = False
 
     @property
     def n(self) -> int:
@@ -54,7 +57,7 @@ class Chunk:
 
     def scored(self, mask: np.ndarray) -> "Chunk":
         """The same samples with only ``mask`` (and not the restart transients) scored."""
-        return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, self.w, self.score & mask, self.warm)
+        return replace(self, score=self.score & mask)
 
     def reweighted(self, r: np.ndarray) -> "Chunk":
         """The same samples weighted by a variance of each segment's own: ``w = σ/σ_seg``,
@@ -74,7 +77,7 @@ class Chunk:
             m = sc[a:b]
             s_seg = math.sqrt(float(np.mean(r[a:b][m] ** 2))) if np.any(m) else sigma
             w[a:b] = sigma / max(s_seg, 1e-3 * sigma)
-        return Chunk(self.x_r, self.x, self.Ts, self.starts, self.derivs, w, self.score, self.warm)
+        return replace(self, w=w)
 
     def part(self, frac: float) -> "Chunk":
         """The first part of every segment holding ``frac`` of its scored samples (a cheaper
@@ -144,6 +147,64 @@ class Chunk:
             starts[r] = True
         return self._take(keep, starts, score, (warm, vw, aw))
 
+    def shots(self, window_s: float, lead_s: float = 0.1) -> "Chunk":
+        """Every scored sample of the chunk in short windows, each simulated from the recorded
+        state: the chunk of a multiple-shooting fit (Ribeiro et al., Automatica 2020).
+
+        Every segment is cut into consecutive windows of about ``window_s`` (a tail shorter
+        than half a window joins the one before).  The first window of a segment starts
+        where the segment does (at rest, or warm where the chunk itself restarts warm); every
+        other one restarts the simulation mid-move on the recorded position, velocity and
+        acceleration between ``lead_s`` and twice that before its first sample, where
+        :func:`_restart_state` reads them best, and that lead-in is not scored: what the
+        restart cannot know (a mode's phase and deflection, a delay's history, an integral
+        wound up in saturation) settles there.  Lead-ins repeat samples the window before
+        scores, so every scored sample of the chunk is scored once.  A model's error then
+        grows over one window only, never over a whole segment.
+        """
+        L = max(int(round(window_s / self.Ts)), 1)
+        lead = int(round(lead_s / self.Ts))
+        seg_starts = np.flatnonzero(self.starts)
+        seg_ends = np.append(seg_starts[1:], self.n)
+        idx, starts, score, warm, vw, aw = [], [], [], [], [], []
+        # mid-move: the command moves at every sample the restart's parabola is read from
+        # (at the end of a move the table may already rest in its gap or stick)
+        still = np.convolve(self.derivs[0] == 0.0, np.ones(2 * _HALF + 1), mode="same")
+        moving = still == 0.0
+        for lo, hi in zip(seg_starts.tolist(), seg_ends.tolist()):
+            a = lo
+            while a < hi:
+                b = hi if hi - (a + L) < L // 2 else a + L
+                r, w0, v0, a0 = lo, False, 0.0, 0.0
+                if self.warm is not None:
+                    w0, v0, a0 = bool(self.warm[0][lo]), float(self.warm[1][lo]), float(self.warm[2][lo])
+                at = _moving_restart(moving, lo + _HALF, a - lead, lead) if a > lo else None
+                if at is not None:
+                    r, v0, a0 = _restart_state(self.x, self.derivs[0], *at, self.Ts, moving)
+                    w0 = True
+                elif a > lo:  # nothing moves between the segment's start and the window: restart there
+                    r = lo
+                k = np.arange(r, b)
+                idx.append(k)
+                st = np.zeros(k.size, dtype=bool)
+                st[0] = True
+                starts.append(st)
+                sc = self.score[k].copy()
+                sc[: a - r] = False  # the lead-in is not scored
+                score.append(sc)
+                wm = np.zeros(k.size, dtype=bool)
+                wm[0] = w0
+                warm.append(wm)
+                vv, aa = np.zeros(k.size), np.zeros(k.size)
+                vv[0], aa[0] = v0, a0
+                vw.append(vv)
+                aw.append(aa)
+                a = b
+        i = np.concatenate(idx)
+        return Chunk(self.x_r[i], self.x[i], self.Ts, np.concatenate(starts),
+                     (self.derivs[0][i], self.derivs[1][i]), self.w[i], np.concatenate(score),
+                     (np.concatenate(warm), np.concatenate(vw), np.concatenate(aw)), estimate_states=True)
+
     def _take(self, keep: np.ndarray, starts: np.ndarray, score: np.ndarray,
               warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> "Chunk":
         """The samples of ``keep`` with the given starts, scored samples and warm restarts."""
@@ -156,14 +217,32 @@ class Chunk:
 _HALF = 5
 
 
-def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float) -> tuple[int, float, float]:
+def _moving_restart(moving: np.ndarray, lo: int, hi: int, lead: int) -> tuple[int, int] | None:
+    """The span [hi − lead, hi] to restart in (:func:`_restart_state`) when the command moves
+    there (``moving``, a mask of samples); else the ``lead`` samples up to the last sample in [lo, hi] where it moves, so
+    a window after a dwell restarts on the move before it (at rest the side of a gap the
+    table rests on and the force friction holds are not known).  None when the command
+    does not move in [lo, hi].
+    """
+    if hi < lo:
+        return None
+    where = np.flatnonzero(moving[lo : hi + 1])
+    if where.size == 0:
+        return None
+    last = lo + int(where[-1])
+    return max(last - lead, lo), last
+
+
+def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float,
+                   moving: np.ndarray | None = None) -> tuple[int, float, float]:
     """The sample in [lo, hi] where the recorded position ``x`` is closest to a parabola over
     the ``_HALF`` samples either side (the acceleration steady: no switch of the command's
     jerk, no reversal inside), while the command moves (``v_r`` ≠ 0: at rest the side of a
     gap the table rests on is not known) where it does, with the parabola's slope and
     curvature there (mm/s, mm/s²): a least-squares fit averages the encoder's quantization
     and noise that plain differences would amplify.  ``x`` must hold ``_HALF`` samples
-    either side of [lo, hi].
+    either side of [lo, hi].  ``moving``: the samples that count as moving (default
+    ``v_r`` ≠ 0).
     """
     t = np.arange(-_HALF, _HALF + 1) * Ts
     V = np.vander(t, 3)  # columns t², t, 1
@@ -172,7 +251,7 @@ def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float) 
     X = x[idx]
     C = X @ P.T
     misfit = np.sum((X - C @ V.T) ** 2, axis=1)
-    moving = v_r[lo : hi + 1] != 0.0
+    moving = v_r[lo : hi + 1] != 0.0 if moving is None else moving[lo : hi + 1]
     if moving.any():
         misfit[~moving] = np.inf
     k = int(np.argmin(misfit))
@@ -266,9 +345,83 @@ def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None) -> np.
 
 
 def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> np.ndarray:
-    """Weighted free-run residual w·(x̂ − x) on ``mask`` (default the scored samples), mm."""
+    """Weighted free-run residual w·(x̂ − x) on ``mask`` (default the scored samples), mm;
+    on multiple-shooting windows with the restart states estimated (:func:`estimated_states`)."""
     m = chunk.score if mask is None else mask
-    return chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
+    r = chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
+    return estimated_states(r, spec.effects, spec.ep, spec.modes, chunk, restart_responses(spec, chunk, m), m)
+
+
+#: Offsets of a restart's position (mm), velocity (mm/s) and acceleration (mm/s²) whose
+#: responses :func:`restart_responses` differences: small against what a drive moves, large
+#: against rounding.
+_RESTART_STEPS = (1e-4, 1e-2, 1.0)
+
+
+def restart_responses(spec: ModelSpec, chunk: Chunk, m: np.ndarray | None = None) -> list[np.ndarray] | None:
+    """The weighted responses of ``spec``'s simulation on ``chunk``'s samples ``m`` (default
+    the scored ones) to an offset of every warm restart's position, velocity and
+    acceleration (per unit of ``_RESTART_STEPS``, forward differences): the directions a
+    window's error takes when the restart misreads the state — the position, the velocity,
+    the integral holding the acceleration.  None unless ``chunk`` estimates its restart
+    states (:meth:`Chunk.shots`).
+    """
+    if not chunk.estimate_states or chunk.warm is None:
+        return None
+    m = chunk.score if m is None else m
+    on, v, a = chunk.warm
+    y = simulate_spec(spec, chunk)
+    cols = []
+    for i, h in enumerate(_RESTART_STEPS):
+        moved = replace(chunk, x=chunk.x + h * on) if i == 0 else replace(
+            chunk, warm=(on, v + h * on, a) if i == 1 else (on, v, a + h * on))
+        cols.append(chunk.w[m] * (simulate_spec(spec, moved)[m] - y[m]))
+    return cols
+
+
+def estimated_states(r: np.ndarray, effects: tuple[str, ...], ep: np.ndarray, modes: np.ndarray, chunk: Chunk,
+                     cols: list[np.ndarray] | None, m: np.ndarray | None = None) -> np.ndarray:
+    """``r`` (weighted residuals of ``chunk``'s samples ``m``, default the scored ones) with
+    every warm window's initial state estimated: the initial states of multiple shooting.
+
+    A restart mid-move reads position, velocity and acceleration from the recording and
+    settles the rest; what it misreads adds to the window's output, to first order, as a
+    combination of ``cols`` (:func:`restart_responses`) and — for a mode on the recorded
+    position (``resonance``, output filter, restarted undeflected) — of its free response
+    e^(−ζωt)·(A cos ω_d t + B sin ω_d t), t from the restart.  The combination of every
+    window is estimated by least squares and removed (variable projection: the states are
+    eliminated, not fitted as parameters).  Windows restarted at rest keep their state.
+    Returns ``r`` itself on other chunks.
+    """
+    if cols is None or not chunk.estimate_states or chunk.warm is None:
+        return r
+    m = chunk.score if m is None else m
+    win = np.cumsum(chunk.starts) - 1  # window of each sample
+    first = np.flatnonzero(chunk.starts)
+    warm_win = chunk.warm[0][first]
+    basis = list(cols)
+    if "resonance" in effects and int(modes[MODE_SLOTS["resonance"]]) == 0:
+        f, zeta = float(ep[EP_INDEX["freq_hz"]]), float(ep[EP_INDEX["damping"]])
+        if f > 0.0 and 0.0 <= zeta < 1.0:
+            t = (np.arange(chunk.n) - first[win]) * chunk.Ts
+            om = 2.0 * math.pi * f
+            env = chunk.w * np.exp(-zeta * om * t)
+            wd = om * math.sqrt(1.0 - zeta * zeta)
+            basis += [(env * np.cos(wd * t))[m], (env * np.sin(wd * t))[m]]
+    k = win[m]
+    live = warm_win[k]
+    B = np.stack([np.where(live, b, 0.0) for b in basis], axis=1)  # (samples, columns)
+    if not (np.all(np.isfinite(B)) and np.all(np.isfinite(r))):
+        return r
+    nw, nc = first.size, B.shape[1]
+    G = np.zeros((nw, nc, nc))
+    h = np.zeros((nw, nc))
+    for i in range(nc):
+        h[:, i] = np.bincount(k, weights=B[:, i] * r, minlength=nw)
+        for j in range(i, nc):
+            G[:, i, j] = G[:, j, i] = np.bincount(k, weights=B[:, i] * B[:, j], minlength=nw)
+    coef = np.einsum("wij,wj->wi", np.linalg.pinv(G, rcond=1e-10, hermitian=True), h)
+    return r - np.einsum("si,si->s", B, coef[k])
 
 
 def sse(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> float:
