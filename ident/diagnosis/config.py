@@ -146,6 +146,9 @@ class DiagnosisConfig:
     #: 0.1 % scale: the coarse step reads the slope through the ripple, the fine one polishes.
     fd_step: float = 1e-3
     fd_step_rough: float = 1e-2
+    #: The fine step stands for the exact Jacobian (complex-step sensitivities of the
+    #: simulation, :func:`ident.diagnosis.augmented.sensitivities`); True: the coarse one too.
+    exact_rough: bool = False
     #: Fit β = b2 − a2 in place of b2 (eq. 3.3's position gains): b2·x_r − a2·x becomes
     #: a2·(x_r − x) + β·x_r, so a step on a2 moves u by a2's share of the tracking error,
     #: not of the position (~100 mm): b2 and a2 nearly cancel and a fit on them crawls
