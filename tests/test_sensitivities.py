@@ -86,10 +86,13 @@ def test_on_a_smooth_model_the_sensitivities_are_the_slope_to_many_digits():
 
 
 def test_a_fit_with_the_exact_jacobian_gets_where_differences_get(monkeypatch):
-    """fit_spec at the fine step takes its Jacobian from the sensitivities (no difference of
-    the smooth model is simulated) and ends where the forward differences end: a dead time
+    """fit_spec at the fine step, with ``exact_fine``, takes its Jacobian from the sensitivities
+    (no difference of the smooth model is simulated) and ends where the forward differences
+    end (the default): a dead time
     in the loop started 20 % short and the base 3 % off."""
     import ident.diagnosis.candidates as cand
+    from dataclasses import replace
+
     from ident.diagnosis.config import DEFAULT
     from ident.diagnosis.spec import make_chunk, sse
 
@@ -104,9 +107,8 @@ def test_a_fit_with_the_exact_jacobian_gets_where_differences_get(monkeypatch):
         calls = []
         mp.setattr(cand, "sensitivities", lambda *a, **k: calls.append(1) or sensitivities(*a, **k))
         mp.setattr(cand, "simulate_augmented_many", lambda *a, **k: pytest.fail("a difference was taken"))
-        exact = cand.fit_spec(start, chunk, max_iter=30, cfg=DEFAULT)
+        exact = cand.fit_spec(start, chunk, max_iter=30, cfg=replace(DEFAULT, exact_fine=True))
         assert calls
-    monkeypatch.setattr(cand, "rippled", lambda spec: True)  # every column by differences
     differences = cand.fit_spec(start, chunk, max_iter=30, cfg=DEFAULT)
     assert sse(exact, chunk) < 0.02 * sse(start, chunk)
     assert sse(exact, chunk) == pytest.approx(sse(differences, chunk), rel=1e-3)
@@ -125,3 +127,15 @@ def test_a_model_whose_cost_ripples_is_fitted_by_differences():
     assert not rippled(ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": 0.01}, 0))
     assert not rippled(ModelSpec(THETA.copy()).with_effect("stribeck", {"static_to_coulomb_ratio": 2.0,
                                                                           "stribeck_velocity_mm_s": 1.0}))
+
+
+def test_with_exact_jacobians_asked_for_a_rippled_model_still_takes_differences(monkeypatch):
+    from dataclasses import replace
+
+    import ident.diagnosis.candidates as cand
+    from ident.diagnosis.config import DEFAULT
+
+    chunk = _chunk()[0]
+    spec = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
+    monkeypatch.setattr(cand, "sensitivities", lambda *a, **k: pytest.fail("an exact Jacobian was taken"))
+    cand.fit_spec(spec, chunk, max_iter=2, cfg=replace(DEFAULT, exact_fine=True, exact_rough=True))

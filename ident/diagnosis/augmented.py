@@ -85,6 +85,7 @@ import numpy as np
 from numba import njit
 
 from ident.axis_model import CONTROLLERS, EFFECT_NAMES
+from ident.complex_step import cos, div, exp, sin
 
 __all__ = [
     "EFFECTS",
@@ -229,15 +230,16 @@ def _friction_step(v: float, F: float, h: float, m: float, d0: float, d1: float,
     rest = h
     if v.real != 0.0:
         d = d0 if v.real > 0.0 else d1
-        lvl = d * (1.0 + (rs - 1.0) * np.exp(-(v / vs) ** 2)) if on_st else d
-        vn = v + h * (F - lvl) / m
+        q = div(v, vs)
+        lvl = d * (1.0 + (rs - 1.0) * exp(-(q * q))) if on_st else d
+        vn = v + div(h * (F - lvl), m)
         if vn.real * v.real > 0.0:
             return vn
-        rest = h * (1.0 - v / (v - vn))
+        rest = h * (1.0 - div(v, v - vn))
     if F.real > (d0 * rs).real:
-        return rest * (F - d0 * rs) / m
+        return div(rest * (F - d0 * rs), m)
     if F.real < (d1 * rs).real:
-        return rest * (F - d1 * rs) / m
+        return div(rest * (F - d1 * rs), m)
     return 0.0
 
 
@@ -399,7 +401,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         vk += tau[p] * ak
                         xt[p] = xm[p]
                     if on_cy and not cy_force:
-                        xm[p] -= cs[p] * np.sin(tw[p] * xm[p]) + cc[p] * np.cos(tw[p] * xm[p])
+                        xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                         xt[p] = xm[p]
                     v[p] = vk - 0.5 * h * ak
                     vt[p] = v[p]
@@ -407,14 +409,15 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     if vk.real != 0.0:
                         lvl = d0[p] if vk.real > 0.0 else d1[p]
                         if on_st:
-                            lvl *= 1.0 + (rs[p] - 1.0) * np.exp(-(vk / vs[p]) ** 2)
+                            sv_ = div(vk, vs[p])
+                            lvl *= 1.0 + (rs[p] - 1.0) * exp(-(sv_ * sv_))
                     u0 = ak + lvl
                     if cy_force:
-                        u0 += cs[p] * np.sin(tw[p] * xm[p]) + cc[p] * np.cos(tw[p] * xm[p])
+                        u0 += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                     if two:
                         fc = (1.0 - mu[p]) * ak + lvl
                         if fc.real != 0.0:
-                            xm[p] = xt[p] + fc / kc[p] + (half_c[p] if fc.real > 0.0 else -half_c[p])
+                            xm[p] = xt[p] + div(fc, kc[p]) + (half_c[p] if fc.real > 0.0 else -half_c[p])
                     elif on_bl:
                         sv = vr[k] if vr[k] != 0.0 else vk
                         if sv.real != 0.0:
@@ -444,7 +447,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
             if on_rs and not rs_two:
                 y += q[p]
             if on_cy and not cy_force:
-                y += cs[p] * np.sin(tw[p] * xm[p]) + cc[p] * np.cos(tw[p] * xm[p])
+                y += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
             OUT[p, k] = y
             if want_u:
                 OUT_U[p, k] = 0.0
@@ -459,7 +462,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 xp = (1.0 - psi[p]) * xfb + psi[p] * xw[p]
                 if sampled:
                     if j == 0:
-                        vfb = (xm[p] - xm_prev[p]) / Ts if not first[p] else 0.0
+                        vfb = div(xm[p] - xm_prev[p], Ts) if not first[p] else 0.0
                         xm_prev[p] = xm[p]
                         ei_new = ei[p] + Ts * (xr[k] - xfb)
                         if causal:
@@ -468,7 +471,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                                 vb[p] = (xr[k] - xr[k - 1]) / Ts
                             else:
                                 vb[p] = vr[k] - 0.5 * ar[k] * Ts if warm[k] else 0.0
-                            uh = b0[p] * (vb[p] - vb_prev[p]) / Ts + b1[p] * vb[p]
+                            uh = div(b0[p] * (vb[p] - vb_prev[p]), Ts) + b1[p] * vb[p]
                         else:
                             uh = b0[p] * ar[k] + b1[p] * vr[k]
                         uh += b2[p] * xr[k] + a3[p] * ei_new - a2[p] * xp - a1[p] * vfb
@@ -518,7 +521,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     u = (1.0 - fr) * buf[p, i0] + fr * buf[p, i1]
                     bi[p] = (bi[p] + 1) % nb
                 if cy_force:
-                    u -= cs[p] * np.sin(tw[p] * xm[p]) + cc[p] * np.cos(tw[p] * xm[p])
+                    u -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                 if two:
                     dl = xm[p] - xt[p]
                     ddl = v[p] - vt[p]
@@ -536,7 +539,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                             fc = 0.0
                     else:
                         fc = kc[p] * dl + cdmp[p] * ddl
-                    vn = v[p] + h * (u - fc) / mu[p]
+                    vn = v[p] + div(h * (u - fc), mu[p])
                     mt = 1.0 - mu[p]
                     vtn = _friction_step(vt[p], fc, h, mt, d0[p], d1[p], rs[p], on_st, vs[p])
                     v[p] = vn
@@ -549,7 +552,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         xw[p] += h * vn
                     continue
                 vn = _friction_step(v[p], u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
-                acc = (vn - v[p]) / h
+                acc = div(vn - v[p], h)
                 v[p] = vn
                 xm[p] += h * vn
                 if wind:

@@ -81,11 +81,12 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     ``spec.ranges`` (weakly determined, centred by :func:`centre_delay`) are held.
     ``fd_step``: the forward-difference step (scaled units; default ``cfg.fd_step``; an
     effect may fix its own for a parameter); a step coarser than ``cfg.fd_step`` is followed
-    by a polish at the fine step (half the iterations) when ``polish``.  The fine step is
-    not a difference: it stands for the exact Jacobian, the complex-step sensitivities of
-    the simulation (:func:`~ident.diagnosis.augmented.sensitivities`); the coarse one too
-    when ``cfg.exact_rough`` — but for a parameter with a step of its effect's own, and on a
-    model whose cost ripples (:func:`rippled`), where every column is a difference.  ``secant_nfev`` > 0:
+    by a polish at the fine step (half the iterations) when ``polish``.  With
+    ``cfg.exact_fine`` (``cfg.exact_rough``) the fine (coarse) step is not a difference: it
+    stands for the exact Jacobian, the complex-step sensitivities of the simulation
+    (:func:`~ident.diagnosis.augmented.sensitivities`) — but for a parameter with a step of
+    its effect's own, and on a model whose cost ripples (:func:`rippled`), where every
+    column is a difference.  ``secant_nfev`` > 0:
     the secant Levenberg–Marquardt (:func:`ident.least_squares.secant_lm`) with that many
     simulations instead, no polish.  ``search``: a fit of an effect's search (the race and its
     polish), for ``cfg.fit_beta``.  Returns the fitted copy; a fit that fails to improve
@@ -207,7 +208,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     rough = rippled(spec)
 
     def how(h: float) -> dict:  # the Jacobian of a fit at difference step h
-        exact = (h <= cfg.fd_step or cfg.exact_rough) and not rough
+        exact = (cfg.exact_fine if h <= cfg.fd_step else cfg.exact_rough) and not rough
         # the columns simulated together, in two threads (the kernel runs outside the GIL;
         # ident.least_squares._jacobian): the same result, sooner
         return dict(parallel=True, resid_many=resid_many, step=steps(h), jac=jac if exact else None, jac_skip=own_step)
