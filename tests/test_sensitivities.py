@@ -139,3 +139,24 @@ def test_with_exact_jacobians_asked_for_a_rippled_model_still_takes_differences(
     spec = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
     monkeypatch.setattr(cand, "sensitivities", lambda *a, **k: pytest.fail("an exact Jacobian was taken"))
     cand.fit_spec(spec, chunk, max_iter=2, cfg=replace(DEFAULT, exact_fine=True, exact_rough=True))
+
+
+def test_the_intervals_exact_jacobian_is_the_central_differences_on_a_smooth_model():
+    """intervals._jacobian (exact) against its central differences at 1 % on a dead time in the
+    loop: the same columns, base and effect, to the differences' truncation (both on the
+    estimate's sub-steps: here +1 % of a1 would make the model choose 3 instead of 2)."""
+    from ident.diagnosis.config import DEFAULT
+    from ident.diagnosis.intervals import _Columns, _difference_jacobian, _jacobian
+    from ident.diagnosis.spec import make_chunk
+
+    chunk0 = _chunk()[0]
+    spec = ModelSpec(THETA.copy()).with_effect("time_delay", {"delay_s": 0.0023}, 1)
+    x = simulate_augmented(chunk0.x_r, chunk0.x, chunk0.Ts, spec.theta, ep=spec.ep, **_kw(spec, chunk0))
+    chunk = make_chunk(chunk0.x_r, x + np.random.default_rng(2).normal(0.0, 1e-5, x.size), chunk0.Ts, chunk0.starts)
+    c = _Columns(spec, {"time_delay": {}}, DEFAULT)
+    J, r = _jacobian(spec, chunk, c, None)
+    Jd, rd = _difference_jacobian(spec, chunk, c, None)
+    np.testing.assert_array_equal(r, rd)
+    assert J.shape == Jd.shape == (r.size, 9)  # θ and the dead time
+    for k in range(J.shape[1]):
+        assert np.linalg.norm(J[:, k] - Jd[:, k]) <= 0.02 * np.linalg.norm(Jd[:, k]), k

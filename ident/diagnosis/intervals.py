@@ -146,15 +146,18 @@ def _jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns, pool: Executor | None)
 
 def _difference_jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns,
                          pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_jacobian` by central differences at the coarse steps (a rippled cost's trend)."""
+    """:func:`_jacobian` by central differences at the coarse steps (a rippled cost's trend),
+    on the estimate's sub-steps (a step of a1 can change the sub-steps the model would choose:
+    a difference across them reads the change of discretisation, not the slope)."""
     m = chunk.score
     w = chunk.w[m]
     v0 = c.values(spec)
+    nsub = sim_substeps(spec, chunk.Ts)
 
     def wsim(k: int, sign: float) -> np.ndarray:
         v = v0.copy()
         v[k] += sign * c.steps[k]
-        return w * simulate_spec(c.moved(spec, v), chunk)[m]
+        return w * simulate_spec(c.moved(spec, v), chunk, nsub)[m]
 
     jobs = [(k, sg) for k in range(len(c.cols)) for sg in (1.0, -1.0)]
     with np.errstate(all="ignore"):
