@@ -209,9 +209,9 @@ def model_substeps(theta: np.ndarray, Ts: float, flags: np.ndarray, ep: np.ndarr
     needs stability only, not phase accuracy: its frequency is a stand-in for "stiff", not
     a fitted value, so its sub-step turns at most :data:`CONTACT_STEP_RAD`.
     """
-    f = ep[3] if flags[2] else 0.0
+    f = ep[_FREQ] if flags[_FL_RESONANCE] else 0.0
     n = substeps(theta, Ts, 1.5 * f)
-    if flags[0] and modes[0] >= 1 and not (flags[2] and modes[3] >= 1):
+    if flags[_FL_BACKLASH] and modes[_MD_BACKLASH] >= 1 and not (flags[_FL_RESONANCE] and modes[_MD_RESONANCE] >= 1):
         n = max(n, math.ceil(Ts * 2.0 * math.pi * CONTACT_HZ / CONTACT_STEP_RAD))
     return n
 
@@ -642,7 +642,7 @@ def simulate_augmented(
     md = np.zeros(N_MODES, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
     if md.size < N_MODES:
         md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
-    if not (np.isfinite(th).all() and np.isfinite(e).all()) or e[6] < 0.0 or e[6] > 1.0:
+    if not (np.isfinite(th).all() and np.isfinite(e).all()) or e[_DELAY] < 0.0 or e[_DELAY] > 1.0:
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:
         nsub = model_substeps(th, Ts, fl, e, md)
