@@ -200,9 +200,9 @@ def stationary_point(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig, pool: 
         v = c.values(spec)
         for _half in range(5):
             cand = c.moved(spec, np.clip(v + step, lo, hi))
-            with np.errstate(all="ignore"):
+            with np.errstate(all="ignore"):  # a diverging trial step is expected and halved
                 rc = chunk.w[chunk.score] * (simulate_spec(cand, chunk)[chunk.score] - chunk.x[chunk.score])
-            c_new = float(rc @ rc)
+                c_new = float(rc @ rc)
             if math.isfinite(c_new) and c_new < cost:
                 break
             step = 0.5 * step
