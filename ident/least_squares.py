@@ -47,7 +47,7 @@ class LMResult:
 
 def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_step: bool = False,
                ftol: float = 1e-5, ftol_iter: int = 2, xtol: float = 1e-8, parallel: bool = False,
-               resid_many=None) -> LMResult:
+               resid_many=None, jac=None, jac_skip=()) -> LMResult:
     """Minimise ½‖r(z)‖² subject to lb ≤ z ≤ ub by a projected Levenberg–Marquardt.
 
     Each iteration takes a forward-difference Jacobian J (one residual evaluation per
@@ -92,6 +92,16 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
         ``resid_many(Z) -> ndarray (P, m)``: row p exactly ``resid(Z[p])``, for several
         points at once (the Jacobian's columns; a simulation of several parameter sets in
         one pass is faster than one after the other).  The result is the same bit for bit.
+    jac : callable, optional
+        ``jac(z, cols) -> ndarray (len(cols), m)``: the exact derivatives ``∂r/∂z_j`` for j in
+        ``cols`` (e.g. complex-step sensitivities of a simulation,
+        :func:`ident.diagnosis.augmented.sensitivities`), used in place of the differences
+        (``step``, ``relative_step`` and ``resid_many`` then go unused for J; each
+        column counts as one evaluation in ``nfev``).  With an exact J there is no smaller
+        step to retry with: when no damping gives a descent the search stops.
+    jac_skip : sequence of int
+        Columns ``jac`` does not give: forward differences at ``step`` (a parameter whose
+        cost ripples, read through the ripple on purpose).
 
     Returns
     -------
@@ -131,7 +141,7 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
     small = 0  # consecutive accepted steps with a relative decrease below ftol
     retried = False  # the last iteration found no descent: its Jacobian was re-taken with h0 = step / 10
     for it in range(max_iter):
-        J = _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many)
+        J = _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many, jac, jac_skip)
         nfev += n
         A, g = _normal(J, r)
         free = _free(z, g, lb, ub)
@@ -149,6 +159,8 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
                 break
             lam *= _LAM_UP
         else:
+            if jac is not None and not jac_skip:
+                return LMResult(z, cost, nfev, "no step decreases the cost")
             if retried:
                 return LMResult(z, cost, nfev,
                                 "no step decreases the cost, also with a 10x smaller difference step")
@@ -172,7 +184,8 @@ def bounded_lm(resid, z0, lb, ub, *, max_iter: int = 25, step=1e-3, relative_ste
 
 
 def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float = 1e-5,
-              ftol_iter: int = 2, parallel: bool = False, resid_many=None) -> LMResult:
+              ftol_iter: int = 2, parallel: bool = False, resid_many=None, jac=None,
+              jac_skip=()) -> LMResult:
     """:func:`bounded_lm` with a secant Jacobian: one or two residual evaluations per iteration.
 
     The secant version of Marquardt's method (Madsen, Nielsen & Tingleff, *Methods for
@@ -189,8 +202,9 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
     1–2 evaluations instead of ``n + 1``: a fixed budget of evaluations (``max_nfev``,
     the differences included) goes several times further from a poor start, at the price
     of less accurate steps near the minimum (polish with :func:`bounded_lm`).  Bounds,
-    ``step``, ``ftol``, ``ftol_iter``, ``parallel`` and ``resid_many`` as in :func:`bounded_lm`
-    (the step absolute, in the units of z).
+    ``step``, ``ftol``, ``ftol_iter``, ``parallel``, ``resid_many``, ``jac`` and ``jac_skip`` as in
+    :func:`bounded_lm` (the step absolute, in the units of z; with ``jac`` the fresh
+    Jacobians and the refreshed columns are exact).
     """
     z, lb, ub, step = _box(z0, lb, ub, step)
     n = z.size
@@ -201,7 +215,7 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
     def jacobian() -> np.ndarray:
         nonlocal nfev
         nfev += n
-        return _jacobian(resid, z, r, step, ub, False, parallel, resid_many)
+        return _jacobian(resid, z, r, step, ub, False, parallel, resid_many, jac, jac_skip)
 
     J = jacobian()
     lam = _LAM0
@@ -247,7 +261,8 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
         j = col % n
         col += 1
         if abs(delta[j]) < 0.8 * np.sqrt(dd) and nfev < max_nfev:
-            J[:, j] = _fd_column(resid, z, r, j, step, ub, False)
+            J[:, j] = (_fd_column(resid, z, r, j, step, ub, False) if jac is None or j in jac_skip
+                       else jac(z, [j])[0])
             nfev += 1
     return LMResult(z, cost, nfev, f"max_nfev: {nfev} evaluations")
 
@@ -278,10 +293,12 @@ def _helpers() -> ThreadPoolExecutor:
         return _HELPERS
 
 
-def _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many=None) -> np.ndarray:
+def _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many=None, jac=None,
+              jac_skip=()) -> np.ndarray:
     """The forward-difference Jacobian (columns as :func:`_fd_column`), stored by columns.
 
-    ``resid_many``: the columns' points evaluated together (see :func:`bounded_lm`).
+    ``resid_many``: the columns' points evaluated together (see :func:`bounded_lm`); ``jac``:
+    the exact columns instead but those in ``jac_skip`` (see :func:`bounded_lm`).
     ``parallel``: the columns in two groups, which the calling thread and a helper thread
     take in turn from a shared counter, so the caller never waits for a helper that has not
     started (on a busy machine the caller then takes both groups itself).  Each column is
@@ -293,7 +310,14 @@ def _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many=None) -> 
     n = z.size
     J = np.empty((r.size, n), order="F")
 
-    def columns(js: range) -> None:
+    def columns(js) -> None:
+        if jac is not None:
+            exact = [j for j in js if j not in jac_skip]
+            if exact:
+                J[:, exact] = jac(z, exact).T
+            js = [j for j in js if j in jac_skip]
+            if not js:
+                return
         if resid_many is None:
             for j in js:
                 J[:, j] = _fd_column(resid, z, r, j, h0, ub, relative_step)

@@ -62,6 +62,41 @@ def test_bounded_rosenbrock():
     assert res.nfev == len(resid.points)
 
 
+def _rosenbrock_jac(z, cols):
+    """Exact ∂r/∂z_j of the Rosenbrock residual above, rows for j in cols."""
+    full = np.array([[-20.0 * z[0], -1.0], [10.0, 0.0]])  # row j: ∂(r0, r1)/∂z_j
+    return full[cols]
+
+
+@pytest.mark.parametrize("solver", ["bounded_lm", "secant_lm"])
+@pytest.mark.parametrize("skip", [(), (1,)])
+def test_an_exact_jacobian_reaches_the_bounded_rosenbrock_minimum(solver, skip):
+    """``jac`` in place of the differences (``jac_skip``: those columns by differences still)."""
+    asked = []
+
+    def jac(z, cols):
+        asked.extend(cols)
+        return _rosenbrock_jac(z, cols)
+
+    resid = Counted(lambda z: [10.0 * (z[1] - z[0] ** 2), 1.0 - z[0]])
+    kw = dict(step=1e-7, ftol=1e-12, jac=jac, jac_skip=skip)
+    res = (bounded_lm(resid, [-1.2, 1.0], [-2.0, -2.0], [0.5, 2.0], max_iter=200, xtol=1e-12, **kw)
+           if solver == "bounded_lm" else secant_lm(resid, [-1.2, 1.0], [-2.0, -2.0], [0.5, 2.0], max_nfev=400, **kw))
+    np.testing.assert_allclose(res.z, [0.5, 0.25], atol=1e-6)
+    assert asked and set(asked).isdisjoint(skip)
+    # every exact column counts as an evaluation, and is not one
+    assert res.nfev == len(resid.points) + len(asked)
+
+
+def test_with_an_exact_jacobian_no_descent_stops_without_retrying_a_smaller_step():
+    # at the minimum of a quadratic no damped step lowers the cost; an exact J is not retaken
+    resid = Counted(lambda z: [z[0] - 1.0, 2.0 * (z[1] + 1.0)])
+    res = bounded_lm(resid, [1.0, -1.0], [-5.0, -5.0], [5.0, 5.0], max_iter=10,
+                     jac=lambda z, cols: np.array([[1.0, 0.0], [0.0, 2.0]])[cols])
+    assert res.message == "no step decreases the cost"
+    assert res.cost == 0.0
+
+
 def test_a_parameter_on_its_bound_with_the_gradient_pointing_out_is_held():
     A, b = _correlated_linear()
     resid = Counted(lambda z: A @ z - b)

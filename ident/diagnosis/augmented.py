@@ -70,8 +70,11 @@ start (a window cut out of a longer recording, ``warm``), on the recorded state 
 
 One compiled kernel (:func:`_kernel_many`) simulates one parameter set
 (:func:`simulate_augmented`) or several in lockstep (:func:`simulate_augmented_many`, the
-columns of a finite-difference Jacobian): each set's free run is the same bit for bit
-either way, and several at once run about twice the simulations per second.
+columns of a difference Jacobian): each set's free run is the same bit for bit either way,
+and several at once run about twice the simulations per second.  The kernel is generic in
+its number type: in complex128 it gives the exact parameter sensitivities by the complex
+step (:func:`sensitivities`); every branch is decided on the real part, so the float64 run
+is the one it always was and the derivative is that of the branch the real run takes.
 """
 
 from __future__ import annotations
@@ -82,6 +85,7 @@ import numpy as np
 from numba import njit
 
 from ident.axis_model import CONTROLLERS, EFFECT_NAMES
+from ident.complex_step import cos, div, exp, sin
 
 __all__ = [
     "EFFECTS",
@@ -96,6 +100,8 @@ __all__ = [
     "model_substeps",
     "simulate_augmented",
     "simulate_augmented_many",
+    "sensitivities",
+    "COMPLEX_STEP",
 ]
 
 #: The effects of SPEC §7 in a fixed order; the flag vector follows it (the axis model's
@@ -138,6 +144,16 @@ CONTACT_DAMPING = 0.5
 #: at 1 kHz) the drivers/sim battery's fitted gaps were 13.5 % off (median) against 4.8 %
 #: with 16 sub-steps, at 0.4 rad (7 sub-steps) 8.1 %, all nine within ±25 % as with 16.
 CONTACT_STEP_RAD = 0.4
+
+# The kernel's slots by name (numba reads module-level ints as compile-time constants).
+_FL_BACKLASH, _FL_STRIBECK, _FL_RESONANCE, _FL_DELAY, _FL_CYCLIC, _FL_SATURATION = (
+    EFFECTS.index(e) for e in ("backlash", "stribeck", "resonance", "time_delay", "cyclic_error", "saturation"))
+_MD_BACKLASH, _MD_DELAY, _MD_CYCLIC, _MD_RESONANCE, _MD_CONTROLLER, _MD_SATURATION = (
+    MODE_SLOTS[k] for k in ("backlash", "time_delay", "cyclic_error", "resonance", "controller", "saturation"))
+_GAP, _RATIO, _VS, _FREQ, _DAMPING, _GAIN, _DELAY, _PERIOD, _SIN, _COS, _LIMIT, _MOTOR, _PSI = (
+    EP_INDEX[k] for k in ("gap_mm", "static_to_coulomb_ratio", "stribeck_velocity_mm_s", "freq_hz", "damping", "gain",
+                          "delay_s", "period_mm", "amplitude_sin", "amplitude_cos", "limit", "motor_fraction",
+                          "position_motor_share"))
 
 
 def segment_starts(n: int, segment: np.ndarray | None) -> np.ndarray:
@@ -193,9 +209,9 @@ def model_substeps(theta: np.ndarray, Ts: float, flags: np.ndarray, ep: np.ndarr
     needs stability only, not phase accuracy: its frequency is a stand-in for "stiff", not
     a fitted value, so its sub-step turns at most :data:`CONTACT_STEP_RAD`.
     """
-    f = ep[3] if flags[2] else 0.0
+    f = ep[_FREQ] if flags[_FL_RESONANCE] else 0.0
     n = substeps(theta, Ts, 1.5 * f)
-    if flags[0] and modes[0] >= 1 and not (flags[2] and modes[3] >= 1):
+    if flags[_FL_BACKLASH] and modes[_MD_BACKLASH] >= 1 and not (flags[_FL_RESONANCE] and modes[_MD_RESONANCE] >= 1):
         n = max(n, math.ceil(Ts * 2.0 * math.pi * CONTACT_HZ / CONTACT_STEP_RAD))
     return n
 
@@ -212,17 +228,18 @@ def _friction_step(v: float, F: float, h: float, m: float, d0: float, d1: float,
     sub-step (0.5 ms at 2 per sample), which a fitted dead time would take up.
     """
     rest = h
-    if v != 0.0:
-        d = d0 if v > 0.0 else d1
-        lvl = d * (1.0 + (rs - 1.0) * math.exp(-(v / vs) ** 2)) if on_st else d
-        vn = v + h * (F - lvl) / m
-        if vn * v > 0.0:
+    if v.real != 0.0:
+        d = d0 if v.real > 0.0 else d1
+        q = div(v, vs)
+        lvl = d * (1.0 + (rs - 1.0) * exp(-(q * q))) if on_st else d
+        vn = v + div(h * (F - lvl), m)
+        if vn.real * v.real > 0.0:
             return vn
-        rest = h * (1.0 - v / (v - vn))
-    if F > d0 * rs:
-        return rest * (F - d0 * rs) / m
-    if F < d1 * rs:
-        return rest * (F - d1 * rs) / m
+        rest = h * (1.0 - div(v, v - vn))
+    if F.real > (d0 * rs).real:
+        return div(rest * (F - d0 * rs), m)
+    if F.real < (d1 * rs).real:
+        return div(rest * (F - d1 * rs), m)
     return 0.0
 
 
@@ -231,7 +248,7 @@ def _delay_output(out, starts, tau, Ts):
     """``out`` (recorded positions) delayed by ``tau`` s in place, fractionally, inside segments."""
     n = out.size
     sh = tau / Ts
-    ip = int(sh)
+    ip = int(sh.real)
     fr = sh - ip
     res = out.copy()
     s0 = 0
@@ -256,7 +273,9 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     Rows of ``TH`` (P, 8) and ``EP`` (P, 13) are the sets, rows of ``OUT`` and ``OUT_U`` (P, N)
     their recorded positions and the u applied at each sample (``OUT_U`` of no columns: not
     wanted); flags, variants and sub-steps
-    are common (a finite-difference Jacobian's columns).  Each set's arithmetic is the same,
+    are common (a Jacobian's columns).  Generic in the number type of ``TH``/``EP`` (and of
+    ``OUT``, ``OUT_U``): float64, or complex128 for :func:`sensitivities` — every comparison
+    reads ``.real``, so both take the same branches.  Each set's arithmetic is the same,
     in the same order, whatever the other sets, so a row is bit for bit that set's free
     run alone (P = 1, :func:`simulate_augmented`).  Why several at once: one free run is a
     chain of dependent operations (semi-implicit Euler: every sub-step waits for the last),
@@ -267,21 +286,21 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     n = xr.size
     want_u = OUT_U.shape[1] == n
     h = Ts / nsub
-    on_bl = flags[0] != 0
-    on_st = flags[1] != 0
-    on_rs = flags[2] != 0
-    on_td = flags[3] != 0
-    on_cy = flags[4] != 0
-    on_sa = flags[5] != 0
-    sa_windup = on_sa and modes[5] == 1
-    bl_loop = on_bl and modes[0] >= 1
-    rs_two = on_rs and modes[3] >= 1
-    fb_motor = (rs_two and modes[3] == 2) or (bl_loop and modes[0] == 2)
+    on_bl = flags[_FL_BACKLASH] != 0
+    on_st = flags[_FL_STRIBECK] != 0
+    on_rs = flags[_FL_RESONANCE] != 0
+    on_td = flags[_FL_DELAY] != 0
+    on_cy = flags[_FL_CYCLIC] != 0
+    on_sa = flags[_FL_SATURATION] != 0
+    sa_windup = on_sa and modes[_MD_SATURATION] == 1
+    bl_loop = on_bl and modes[_MD_BACKLASH] >= 1
+    rs_two = on_rs and modes[_MD_RESONANCE] >= 1
+    fb_motor = (rs_two and modes[_MD_RESONANCE] == 2) or (bl_loop and modes[_MD_BACKLASH] == 2)
     two = bl_loop or rs_two
-    td_loop = on_td and modes[1] == 1
-    cy_force = on_cy and modes[2] == 1
-    sampled = modes[4] != 0
-    causal = modes[4] == 2
+    td_loop = on_td and modes[_MD_DELAY] == 1
+    cy_force = on_cy and modes[_MD_CYCLIC] == 1
+    sampled = modes[_MD_CONTROLLER] != 0
+    causal = modes[_MD_CONTROLLER] == 2
     a1 = TH[:, 0].copy()
     a2 = TH[:, 1].copy()
     a3 = TH[:, 2].copy()
@@ -290,42 +309,42 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     b2 = TH[:, 5].copy()
     d0 = TH[:, 6].copy()
     d1 = TH[:, 7].copy()
-    half = np.empty(P)
-    rs = np.empty(P)
-    vs = np.empty(P)
-    wr = np.empty(P)
-    zr = np.empty(P)
-    kr = np.empty(P)
-    tau = np.empty(P)
-    tw = np.empty(P)
-    cs = np.empty(P)
-    cc = np.empty(P)
-    lim = np.empty(P)
-    mu = np.empty(P)
-    psi = np.empty(P)
-    kc = np.empty(P)
-    cdmp = np.empty(P)
-    half_c = np.empty(P)
-    dsteps = np.empty(P)
+    half = np.empty_like(a1)
+    rs = np.empty_like(a1)
+    vs = np.empty_like(a1)
+    wr = np.empty_like(a1)
+    zr = np.empty_like(a1)
+    kr = np.empty_like(a1)
+    tau = np.empty_like(a1)
+    tw = np.empty_like(a1)
+    cs = np.empty_like(a1)
+    cc = np.empty_like(a1)
+    lim = np.empty_like(a1)
+    mu = np.empty_like(a1)
+    psi = np.empty_like(a1)
+    kc = np.empty_like(a1)
+    cdmp = np.empty_like(a1)
+    half_c = np.empty_like(a1)
+    dsteps = np.empty_like(a1)
     nbuf = np.empty(P, dtype=np.int64)
     for p in range(P):
         ep = EP[p]
-        half[p] = 0.5 * ep[0]
-        rs[p] = ep[1] if on_st else 1.0
-        vs[p] = ep[2] if ep[2] > 1e-9 else 1e-9
-        wr[p] = 2.0 * math.pi * ep[3]
-        zr[p] = ep[4]
-        kr[p] = ep[5]
-        tau[p] = ep[6] if on_td else 0.0
-        per = ep[7] if ep[7] > 1e-9 else 1e-9
+        half[p] = 0.5 * ep[_GAP]
+        rs[p] = ep[_RATIO] if on_st else 1.0
+        vs[p] = ep[_VS] if ep[_VS].real > 1e-9 else 1e-9
+        wr[p] = 2.0 * math.pi * ep[_FREQ]
+        zr[p] = ep[_DAMPING]
+        kr[p] = ep[_GAIN]
+        tau[p] = ep[_DELAY] if on_td else 0.0
+        per = ep[_PERIOD] if ep[_PERIOD].real > 1e-9 else 1e-9
         tw[p] = 2.0 * math.pi / per
-        cs[p] = ep[8]
-        cc[p] = ep[9]
-        lim[p] = ep[10]
-        m_ = ep[11] if ep[11] > 0.0 else 1.0
-        psi[p] = ep[12]
+        cs[p] = ep[_SIN]
+        cc[p] = ep[_COS]
+        lim[p] = ep[_LIMIT]
+        m_ = ep[_MOTOR] if ep[_MOTOR].real > 0.0 else 1.0
+        psi[p] = ep[_PSI]
         if two:
-            if m_ <= 0.0 or m_ >= 1.0:
+            if m_.real <= 0.0 or m_.real >= 1.0:
                 m_ = 0.8
             wc = wr[p] if rs_two else 2.0 * math.pi * CONTACT_HZ
             zc = zr[p] if rs_two else CONTACT_DAMPING
@@ -339,25 +358,25 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
             half_c[p] = 0.0
         mu[p] = m_
         dsteps[p] = tau[p] / h if td_loop else 0.0
-        nbuf[p] = int(dsteps[p]) + 3
-    buf = np.zeros((P, int(np.max(nbuf))))
+        nbuf[p] = int(dsteps[p].real) + 3
+    buf = np.zeros((P, int(np.max(nbuf))), dtype=TH.dtype)
     bi = np.zeros(P, dtype=np.int64)
-    xm = np.zeros(P)
-    v = np.zeros(P)
-    xt = np.zeros(P)
-    vt = np.zeros(P)
-    q = np.zeros(P)
-    qd = np.zeros(P)
-    ei = np.zeros(P)
-    vb = np.zeros(P)
-    vb_prev = np.zeros(P)
-    xm_prev = np.zeros(P)
-    xw = np.zeros(P)
+    xm = np.zeros_like(a1)
+    v = np.zeros_like(a1)
+    xt = np.zeros_like(a1)
+    vt = np.zeros_like(a1)
+    q = np.zeros_like(a1)
+    qd = np.zeros_like(a1)
+    ei = np.zeros_like(a1)
+    vb = np.zeros_like(a1)
+    vb_prev = np.zeros_like(a1)
+    xm_prev = np.zeros_like(a1)
+    xw = np.zeros_like(a1)
     wind_x = np.ones(P, dtype=np.bool_)
     wind_h = np.ones(P, dtype=np.bool_)
     first = np.ones(P, dtype=np.bool_)
-    u_h = np.zeros(P)
-    u_last = np.zeros(P)
+    u_h = np.zeros_like(a1)
+    u_last = np.zeros_like(a1)
     for k in range(n):
         last = k == n - 1 or starts[k + 1]
         for p in range(P):
@@ -370,7 +389,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 vt[p] = 0.0
                 q[p] = 0.0
                 qd[p] = 0.0
-                ei[p] = (a2[p] * xm[p] - b2[p] * xr[k]) / a3[p] if a3[p] != 0.0 else 0.0
+                ei[p] = (a2[p] * xm[p] - b2[p] * xr[k]) / a3[p] if a3[p].real != 0.0 else 0.0
                 vb[p] = 0.0
                 vb_prev[p] = 0.0
                 u0 = 0.0
@@ -382,26 +401,27 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         vk += tau[p] * ak
                         xt[p] = xm[p]
                     if on_cy and not cy_force:
-                        xm[p] -= cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                        xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                         xt[p] = xm[p]
                     v[p] = vk - 0.5 * h * ak
                     vt[p] = v[p]
                     lvl = 0.0
-                    if vk != 0.0:
-                        lvl = d0[p] if vk > 0.0 else d1[p]
+                    if vk.real != 0.0:
+                        lvl = d0[p] if vk.real > 0.0 else d1[p]
                         if on_st:
-                            lvl *= 1.0 + (rs[p] - 1.0) * math.exp(-(vk / vs[p]) ** 2)
+                            sv_ = div(vk, vs[p])
+                            lvl *= 1.0 + (rs[p] - 1.0) * exp(-(sv_ * sv_))
                     u0 = ak + lvl
                     if cy_force:
-                        u0 += cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                        u0 += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                     if two:
                         fc = (1.0 - mu[p]) * ak + lvl
-                        if fc != 0.0:
-                            xm[p] = xt[p] + fc / kc[p] + (half_c[p] if fc > 0.0 else -half_c[p])
+                        if fc.real != 0.0:
+                            xm[p] = xt[p] + div(fc, kc[p]) + (half_c[p] if fc.real > 0.0 else -half_c[p])
                     elif on_bl:
                         sv = vr[k] if vr[k] != 0.0 else vk
-                        if sv != 0.0:
-                            xm[p] = xt[p] + (half[p] if sv > 0.0 else -half[p])
+                        if sv.real != 0.0:
+                            xm[p] = xt[p] + (half[p] if sv.real > 0.0 else -half[p])
                     xw[p] = xm[p]
                     xfb = xt[p] if (two and not fb_motor) else xm[p]
                     vf = v[p]
@@ -417,7 +437,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         u_last[p] = u0
                         u_h[p] = u0
                         first[p] = False
-                    if a3[p] != 0.0:
+                    if a3[p].real != 0.0:
                         ei[p] = (u0 - ff - b2[p] * xr[k] + a2[p] * ((1.0 - psi[p]) * xfb + psi[p] * xw[p])
                                  + a1[p] * vf) / a3[p] - e_int
                 for i in range(nbuf[p]):
@@ -427,7 +447,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
             if on_rs and not rs_two:
                 y += q[p]
             if on_cy and not cy_force:
-                y += cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                y += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
             OUT[p, k] = y
             if want_u:
                 OUT_U[p, k] = 0.0
@@ -442,7 +462,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 xp = (1.0 - psi[p]) * xfb + psi[p] * xw[p]
                 if sampled:
                     if j == 0:
-                        vfb = (xm[p] - xm_prev[p]) / Ts if not first[p] else 0.0
+                        vfb = div(xm[p] - xm_prev[p], Ts) if not first[p] else 0.0
                         xm_prev[p] = xm[p]
                         ei_new = ei[p] + Ts * (xr[k] - xfb)
                         if causal:
@@ -451,20 +471,20 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                                 vb[p] = (xr[k] - xr[k - 1]) / Ts
                             else:
                                 vb[p] = vr[k] - 0.5 * ar[k] * Ts if warm[k] else 0.0
-                            uh = b0[p] * (vb[p] - vb_prev[p]) / Ts + b1[p] * vb[p]
+                            uh = div(b0[p] * (vb[p] - vb_prev[p]), Ts) + b1[p] * vb[p]
                         else:
                             uh = b0[p] * ar[k] + b1[p] * vr[k]
                         uh += b2[p] * xr[k] + a3[p] * ei_new - a2[p] * xp - a1[p] * vfb
                         wh = True
                         if on_sa:
-                            ig = (xr[k] - xfb if psi[p] == 0.0
+                            ig = (xr[k] - xfb if psi[p].real == 0.0
                                   else a3[p] * (xr[k] - xfb) - psi[p] * a2[p] * vfb)
-                            if uh > lim[p]:
+                            if uh.real > lim[p].real:
                                 uh = lim[p]
-                                wh = sa_windup or ig <= 0.0
-                            elif uh < -lim[p]:
+                                wh = sa_windup or ig.real <= 0.0
+                            elif uh.real < -lim[p].real:
                                 uh = -lim[p]
-                                wh = sa_windup or ig >= 0.0
+                                wh = sa_windup or ig.real >= 0.0
                         if wh:
                             ei[p] = ei_new
                         u = uh if first[p] else 0.5 * (u_last[p] + uh)
@@ -481,45 +501,45 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     wind = True
                     wind_x[p] = True
                     if on_sa:
-                        ig = xrj - xfb if psi[p] == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * v[p]
-                        if u > lim[p]:
+                        ig = xrj - xfb if psi[p].real == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * v[p]
+                        if u.real > lim[p].real:
                             u = lim[p]
-                            wind = sa_windup or ig <= 0.0
-                        elif u < -lim[p]:
+                            wind = sa_windup or ig.real <= 0.0
+                        elif u.real < -lim[p].real:
                             u = -lim[p]
-                            wind = sa_windup or ig >= 0.0
+                            wind = sa_windup or ig.real >= 0.0
                         wind_x[p] = wind
                 if want_u and j == 0:
                     OUT_U[p, k] = u
                 if td_loop:
                     nb = nbuf[p]
                     buf[p, bi[p]] = u
-                    ip = int(dsteps[p])
+                    ip = int(dsteps[p].real)
                     fr = dsteps[p] - ip
                     i0 = (bi[p] - ip) % nb
                     i1 = (bi[p] - ip - 1) % nb
                     u = (1.0 - fr) * buf[p, i0] + fr * buf[p, i1]
                     bi[p] = (bi[p] + 1) % nb
                 if cy_force:
-                    u -= cs[p] * math.sin(tw[p] * xm[p]) + cc[p] * math.cos(tw[p] * xm[p])
+                    u -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                 if two:
                     dl = xm[p] - xt[p]
                     ddl = v[p] - vt[p]
                     hc = half_c[p]
-                    if hc > 0.0:
-                        if dl > hc:
+                    if hc.real > 0.0:
+                        if dl.real > hc.real:
                             fc = kc[p] * (dl - hc) + cdmp[p] * ddl
-                            if fc < 0.0:
+                            if fc.real < 0.0:
                                 fc = 0.0
-                        elif dl < -hc:
+                        elif dl.real < -hc.real:
                             fc = kc[p] * (dl + hc) + cdmp[p] * ddl
-                            if fc > 0.0:
+                            if fc.real > 0.0:
                                 fc = 0.0
                         else:
                             fc = 0.0
                     else:
                         fc = kc[p] * dl + cdmp[p] * ddl
-                    vn = v[p] + h * (u - fc) / mu[p]
+                    vn = v[p] + div(h * (u - fc), mu[p])
                     mt = 1.0 - mu[p]
                     vtn = _friction_step(vt[p], fc, h, mt, d0[p], d1[p], rs[p], on_st, vs[p])
                     v[p] = vn
@@ -532,7 +552,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         xw[p] += h * vn
                     continue
                 vn = _friction_step(v[p], u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
-                acc = (vn - v[p]) / h
+                acc = div(vn - v[p], h)
                 v[p] = vn
                 xm[p] += h * vn
                 if wind:
@@ -540,9 +560,9 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 if wind_x[p]:
                     xw[p] += h * vn
                 if on_bl:
-                    if xm[p] - xt[p] > half[p]:
+                    if (xm[p] - xt[p]).real > half[p].real:
                         xt[p] = xm[p] - half[p]
-                    elif xm[p] - xt[p] < -half[p]:
+                    elif (xm[p] - xt[p]).real < -half[p].real:
                         xt[p] = xm[p] + half[p]
                 if on_rs:
                     qdd = -2.0 * zr[p] * wr[p] * qd[p] - wr[p] * wr[p] * q[p] - kr[p] * acc
@@ -550,7 +570,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     q[p] += h * qd[p]
     if on_td and not td_loop:
         for p in range(P):
-            if tau[p] > 0.0:
+            if tau[p].real > 0.0:
                 _delay_output(OUT[p], starts, tau[p], Ts)
 
 
@@ -622,7 +642,7 @@ def simulate_augmented(
     md = np.zeros(N_MODES, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
     if md.size < N_MODES:
         md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
-    if not (np.isfinite(th).all() and np.isfinite(e).all()) or e[6] < 0.0 or e[6] > 1.0:
+    if not (np.isfinite(th).all() and np.isfinite(e).all()) or e[_DELAY] < 0.0 or e[_DELAY] > 1.0:
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:
         nsub = model_substeps(th, Ts, fl, e, md)
@@ -671,25 +691,72 @@ def simulate_augmented_many(
     sets are simulated in lockstep in one pass (:func:`_kernel_many`), which is faster than
     one after the other: a single free run waits on its own chain of dependent operations.
     """
+    return _many(x_r, x0, Ts, thetas, eps, float, flags, modes, starts, derivs, nsub, warm)
+
+
+#: Imaginary step of the complex-step derivative: the real part's rounding never sees it, and
+#: no difference is taken, so there is no step to choose (Squire & Trapp 1998).
+COMPLEX_STEP = 1e-30
+
+
+def sensitivities(
+    x_r: np.ndarray,
+    x0: np.ndarray,
+    Ts: float,
+    theta: np.ndarray,
+    ep: np.ndarray,
+    d_theta: np.ndarray,
+    d_ep: np.ndarray,
+    *,
+    flags: np.ndarray,
+    modes: np.ndarray,
+    starts: np.ndarray,
+    derivs: tuple[np.ndarray, np.ndarray],
+    nsub: int,
+    warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """Exact directional derivatives of the free run, (P, N): row p is ∂x̂/∂s at s = 0 of
+    :func:`simulate_augmented` at ``(theta + s·d_theta[p], ep + s·d_ep[p])``, mm per unit of s.
+
+    The complex-step derivative (Squire & Trapp 1998; Martins, Sturdza & Alonso 2003): the
+    kernel runs in complex128 with the parameters ``p + i·h·d`` (h = :data:`COMPLEX_STEP`),
+    and ``Im x̂ / h`` is the derivative to the precision of the real part — no difference is
+    taken, so no rounding cancels and no step size is chosen.  The directions run in lockstep
+    like :func:`simulate_augmented_many`'s sets, and every branch of the kernel is decided on
+    the real part, so the derivative is that of the branch the real run takes: at a Coulomb
+    switch, a backlash contact or a saturation clip the discrete simulator is piecewise
+    smooth, and this is its slope on the piece the estimate sits on (a difference across
+    the switch would read the jump instead).
+    """
+    th = np.asarray(theta, dtype=float).reshape(1, 8)
+    e = np.asarray(ep, dtype=float).reshape(1, N_EP)
+    TH = th + 1j * COMPLEX_STEP * np.asarray(d_theta, dtype=float).reshape(-1, 8)
+    E = e + 1j * COMPLEX_STEP * np.asarray(d_ep, dtype=float).reshape(-1, N_EP)
+    return _many(x_r, x0, Ts, TH, E, complex, flags, modes, starts, derivs, nsub, warm).imag / COMPLEX_STEP
+
+
+def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, warm) -> np.ndarray:
+    """:func:`_kernel_many` on P sets of parameters of number type ``dtype`` (float or complex)."""
     x_r = np.ascontiguousarray(x_r, dtype=float)
     n = x_r.size
-    TH = np.ascontiguousarray(thetas, dtype=float).reshape(-1, 8)
-    E = np.ascontiguousarray(eps, dtype=float).reshape(-1, N_EP)
+    TH = np.ascontiguousarray(thetas, dtype=dtype).reshape(-1, 8)
+    E = np.ascontiguousarray(eps, dtype=dtype).reshape(-1, N_EP)
     fl = np.ascontiguousarray(flags, dtype=np.int64)
     md = np.ascontiguousarray(modes, dtype=np.int64)
     if md.size < N_MODES:
         md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
     # the rows simulate_augmented would refuse (a diverged fit step) are NaN
-    ok = np.isfinite(TH).all(axis=1) & np.isfinite(E).all(axis=1) & (E[:, 6] >= 0.0) & (E[:, 6] <= 1.0)
-    y = np.empty((int(np.count_nonzero(ok)), n))
+    delay = E[:, _DELAY].real
+    ok = np.isfinite(TH).all(axis=1) & np.isfinite(E).all(axis=1) & (delay >= 0.0) & (delay <= 1.0)
+    y = np.empty((int(np.count_nonzero(ok)), n), dtype=dtype)
     if y.shape[0]:
         _kernel_many(x_r, np.ascontiguousarray(derivs[0], dtype=float), np.ascontiguousarray(derivs[1], dtype=float),
                      np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(starts, dtype=np.bool_),
                      *_warm_arrays(warm, n), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]), fl,
-                     np.ascontiguousarray(E[ok]), md, y, np.empty((0, 0)))
+                     np.ascontiguousarray(E[ok]), md, y, np.empty((0, 0), dtype=dtype))
     if ok.all():
         return y
-    out = np.full((TH.shape[0], n), np.nan)
+    out = np.full((TH.shape[0], n), np.nan, dtype=dtype)
     out[ok] = y
     return out
 

@@ -40,7 +40,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS, simulate_augmented, simulate_augmented_many
+from ident.diagnosis.augmented import (EP_INDEX, MODE_SLOTS, N_EP, sensitivities, simulate_augmented,
+                                       simulate_augmented_many)
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, cascade_motor_share, effect_parameters
 from ident.diagnosis.spec import (Chunk, ModelSpec, estimated_states, make_chunk, residual, restart_responses,
@@ -53,8 +54,20 @@ if TYPE_CHECKING:
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
            "sampled_base", "refit_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
            "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "shoot",
-           "polish",
-           "segment_variance_fit"]
+           "polish", "segment_variance_fit", "rippled"]
+
+
+def rippled(spec: ModelSpec) -> bool:
+    """Whether ``spec``'s free-run cost ripples in its parameters on a scale finer than any
+    useful step: a two-mass backlash (the contact's force switches on at sub-step instants)
+    or a saturation (clip and integrator freeze switch there).  There the exact slope is
+    the slope of one ripple — up to 300 times the trend, or of the other sign
+    (benchmarks/bench_cost_ripple.py) — and a fit reads the trend by differences instead;
+    on the other models (Coulomb stick included: its switch instant is resolved inside the
+    sub-step) the exact slope is the trend's.
+    """
+    two_mass_gap = "backlash" in spec.effects and spec.modes[MODE_SLOTS["backlash"]] >= 1
+    return two_mass_gap or "saturation" in spec.effects
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
@@ -69,7 +82,12 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     ``spec.ranges`` (weakly determined, centred by :func:`centre_delay`) are held.
     ``fd_step``: the forward-difference step (scaled units; default ``cfg.fd_step``; an
     effect may fix its own for a parameter); a step coarser than ``cfg.fd_step`` is followed
-    by a polish at the fine step (half the iterations) when ``polish``.  ``secant_nfev`` > 0:
+    by a polish at the fine step (half the iterations) when ``polish``.  With
+    ``cfg.exact_fine`` (``cfg.exact_rough``) the fine (coarse) step is not a difference: it
+    stands for the exact Jacobian, the complex-step sensitivities of the simulation
+    (:func:`~ident.diagnosis.augmented.sensitivities`) — but for a parameter with a step of
+    its effect's own, and on a model whose cost ripples (:func:`rippled`), where every
+    column is a difference.  ``secant_nfev`` > 0:
     the secant Levenberg–Marquardt (:func:`ident.least_squares.secant_lm`) with that many
     simulations instead, no polish.  ``search``: a fit of an effect's search (the race and its
     polish), for ``cfg.fit_beta``.  Returns the fitted copy; a fit that fails to improve
@@ -174,17 +192,43 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
                 r[:] = estimated_states(r, spec.effects, ep, spec.modes, chunk, cols)
         return R
 
+    def jac(z: np.ndarray, cols: list[int]) -> np.ndarray:  # ∂resid/∂z_j for j in cols, exact
+        th, ep = unpack(z)
+        d_th, d_ep = np.zeros((len(cols), 8)), np.zeros((len(cols), N_EP))
+        for i, j in enumerate(cols):  # unpack's linear map, column j
+            if j < nb:
+                d_th[i, j] = s_th[j]
+                if beta and j == 1:
+                    d_th[i, 5] = s_th[1]  # b2 = β + a2
+            else:
+                d_ep[i, idx[j - nb]] = s_ep[j - nb]
+        D = sensitivities(chunk.x_r, chunk.x, chunk.Ts, th, ep, d_th, d_ep, flags=flags, modes=spec.modes,
+                          starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
+        with np.errstate(all="ignore"):
+            G = w * D[:, sel]
+        G[~np.isfinite(G).all(axis=1)] = 0.0  # a diverged simulation: resid() is a constant there
+        return G
+
+    # a parameter with a step of its effect's own (a gap: contact instants on sub-step
+    # boundaries ripple its cost) keeps its difference, read through the ripple on purpose
+    own_step = [nb + i for i, (p, eff) in enumerate(zip(names, own)) if p in eff.fd_step]
+    rough = rippled(spec)
+
+    def how(h: float) -> dict:  # the Jacobian of a fit at difference step h
+        # (exact columns are the free run's: not with the shooting windows' estimated states)
+        exact = (cfg.exact_fine if h <= cfg.fd_step else cfg.exact_rough) and not rough and cols is None
+        # the columns simulated together, in two threads (the kernel runs outside the GIL;
+        # ident.least_squares._jacobian): the same result, sooner
+        return dict(parallel=True, resid_many=resid_many, step=steps(h), jac=jac if exact else None, jac_skip=own_step)
+
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
-        # the Jacobian's columns simulated together, in two threads (the kernel runs outside
-        # the GIL; ident.least_squares._jacobian): the same result, sooner
-        fast = dict(parallel=True, resid_many=resid_many)
         if secant_nfev > 0:
-            fit = secant_lm(resid, z0, lb, ub, max_nfev=secant_nfev, step=steps(fd_step), **fast)
+            fit = secant_lm(resid, z0, lb, ub, max_nfev=secant_nfev, **how(fd_step))
         else:
-            fit = bounded_lm(resid, z0, lb, ub, max_iter=max_iter, step=steps(fd_step), **fast)
+            fit = bounded_lm(resid, z0, lb, ub, max_iter=max_iter, **how(fd_step))
         # polish: the coarse step stops short of the valley's floor
         if polish and fd_step > cfg.fd_step and secant_nfev <= 0:
-            fit = bounded_lm(resid, fit.z, lb, ub, max_iter=max(max_iter // 2, 1), step=steps(cfg.fd_step), **fast)
+            fit = bounded_lm(resid, fit.z, lb, ub, max_iter=max(max_iter // 2, 1), **how(cfg.fd_step))
     z, cost0 = fit.z, fit.cost
     if not np.isfinite(cost0):
         return spec.copy()

@@ -169,6 +169,17 @@ class DiagnosisConfig:
     #: 0.1 % scale: the coarse step reads the slope through the ripple, the fine one polishes.
     fd_step: float = 1e-3
     fd_step_rough: float = 1e-2
+    #: Exact Jacobians (complex-step sensitivities of the simulation,
+    #: :func:`ident.diagnosis.augmented.sensitivities`) in place of the fine differences
+    #: (``exact_fine``) and of the coarse ones (``exact_rough``), on every model whose cost
+    #: does not ripple (:func:`ident.diagnosis.candidates.rippled`).  The intervals' Jacobian
+    #: is exact on those models either way.  Measured with benchmarks/bench_drive_zoo.py
+    #: (drive-zoo-dev / drive-zoo-dev2, one run each): differences 21/21, 20/28; exact fine
+    #: 20/21, 18/28 (a second effect added beside the right one on three cases); exact fine
+    #: and coarse 20/21, 19/28; no false alarm in any (main parameter within ±25 % on 19/24,
+    #: 16/21 and 18/22 of the hits).
+    exact_fine: bool = False
+    exact_rough: bool = False
     #: Fit β = b2 − a2 in place of b2 (eq. 3.3's position gains): b2·x_r − a2·x becomes
     #: a2·(x_r − x) + β·x_r, so a step on a2 moves u by a2's share of the tracking error,
     #: not of the position (~100 mm): b2 and a2 nearly cancel and a fit on them crawls

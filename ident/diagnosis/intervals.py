@@ -2,9 +2,12 @@
 
 The accepted model (base θ of eq. 3.3 and the effects' parameters, fitted jointly by output
 error, eq. 3.6) minimises ``½‖w·(x̂(p) − x)‖²`` over the scored samples.  Linearised at
-the estimate, ``r(p) ≈ r(p̂) + J (p − p̂)`` with ``J = ∂(w·x̂)/∂p`` (central differences of
-the free-run simulation, every column one parameter of the joint fit, base included, so an
-effect's interval carries its correlation with the base).  The residual of a free run is
+the estimate, ``r(p) ≈ r(p̂) + J (p − p̂)`` with ``J = ∂(w·x̂)/∂p`` (the exact complex-step
+sensitivities of the free-run simulation, :func:`~ident.diagnosis.augmented.sensitivities`:
+the slope of the branch of every switch the estimate's run takes — on a model whose cost
+ripples, :func:`~ident.diagnosis.candidates.rippled`, central differences at the coarse step
+that read the trend instead; every column one parameter of the joint fit, base included, so
+an effect's interval carries its correlation with the base).  The residual of a free run is
 coloured — noise and unmodelled dynamics pass through the loop — so the covariance is the
 one that holds for correlated residuals, the linearised delete-one-block jackknife of
 :mod:`ident.uncertainty` (``_sandwich``: blocks of five integrated autocorrelation times of
@@ -32,10 +35,11 @@ from concurrent.futures import Executor
 import numpy as np
 from scipy.special import stdtrit
 
-from ident.diagnosis.augmented import EP_INDEX
+from ident.diagnosis.augmented import EP_INDEX, N_EP, sensitivities
+from ident.diagnosis.candidates import rippled
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS
-from ident.diagnosis.spec import Chunk, ModelSpec, simulate_spec
+from ident.diagnosis.spec import Chunk, ModelSpec, sim_substeps, simulate_spec
 from ident.gauss_newton import to_stationary_point
 from ident.uncertainty import _sandwich
 
@@ -44,7 +48,7 @@ __all__ = ["at_bound", "effect_intervals", "stationary_point"]
 #: A parameter within this share of its box's width (or of the bound's size) of a bound is on it.
 _ON_BOUND = 1e-3
 #: A Gauss–Newton step that would lower the cost by less than this share is not taken: the
-#: estimate is at the stationary point as far as a 1 % difference Jacobian can tell.
+#: estimate is at the stationary point as far as the linearisation can tell.
 _STATIONARY = 1e-4
 
 
@@ -81,7 +85,7 @@ def _parameters(spec: ModelSpec, names: list[str], z: np.ndarray, effect: str, T
 class _Columns:
     """The joint fit's parameters as Jacobian columns: θ of eq. 3.3 and every effect's free
     ones not held by a bound (a dead time the profile centred included: its interval is the
-    curvature's there), with their scales and difference steps."""
+    curvature's there), with their scales and the coarse difference steps of a rippled cost."""
 
     def __init__(self, spec: ModelSpec, held: dict[str, dict[str, str]], cfg: DiagnosisConfig):
         self.cols: list[tuple[str | None, int, str]] = [(None, j, "") for j in range(8)]
@@ -112,15 +116,49 @@ class _Columns:
 
 
 def _jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns, pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
-    """J = ∂(w·x̂)/∂v on the scored samples (central differences) and r = w·(x̂ − x)."""
+    """J = ∂(w·x̂)/∂(v/scale) on the scored samples (exact sensitivities; central differences on
+    a rippled cost) and r = w·(x̂ − x).
+
+    The columns in two groups, jobs of ``pool`` when given (the kernel releases the GIL).
+    """
+    m = chunk.score
+    w = chunk.w[m]
+    if rippled(spec):
+        return _difference_jacobian(spec, chunk, c, pool)
+    nsub = sim_substeps(spec, chunk.Ts)
+
+    def columns(ks: range) -> np.ndarray:
+        d_th, d_ep = np.zeros((len(ks), 8)), np.zeros((len(ks), N_EP))
+        for i, k in enumerate(ks):
+            e, j, _ = c.cols[k]
+            (d_th if e is None else d_ep)[i, j] = c.scale[k]
+        return sensitivities(chunk.x_r, chunk.x, chunk.Ts, spec.theta, spec.ep, d_th, d_ep, flags=spec.flags(),
+                             modes=spec.modes, starts=chunk.starts, derivs=chunk.derivs, nsub=nsub,
+                             warm=chunk.warm)[:, m]
+
+    n = len(c.cols)
+    groups = [range(0, (n + 1) // 2), range((n + 1) // 2, n)]
+    with np.errstate(all="ignore"):
+        parts = list(pool.map(columns, groups)) if pool is not None else [columns(g) for g in groups]
+        r = w * (simulate_spec(spec, chunk)[m] - chunk.x[m])
+        J = w[:, None] * np.concatenate(parts, axis=0).T
+    return J, r
+
+
+def _difference_jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns,
+                         pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_jacobian` by central differences at the coarse steps (a rippled cost's trend),
+    on the estimate's sub-steps (a step of a1 can change the sub-steps the model would choose:
+    a difference across them reads the change of discretisation, not the slope)."""
     m = chunk.score
     w = chunk.w[m]
     v0 = c.values(spec)
+    nsub = sim_substeps(spec, chunk.Ts)
 
     def wsim(k: int, sign: float) -> np.ndarray:
         v = v0.copy()
         v[k] += sign * c.steps[k]
-        return w * simulate_spec(c.moved(spec, v), chunk)[m]
+        return w * simulate_spec(c.moved(spec, v), chunk, nsub)[m]
 
     jobs = [(k, sg) for k in range(len(c.cols)) for sg in (1.0, -1.0)]
     with np.errstate(all="ignore"):
@@ -150,11 +188,15 @@ def stationary_point(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig, pool: 
     lo, hi = np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes])
     m = chunk.score
 
+    def per_unit(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # J per unit of each parameter
+        J, r = _jacobian(c.moved(spec, v), chunk, c, pool)
+        return J / c.scale[None, :], r
+
     def residual(v: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):
             return chunk.w[m] * (simulate_spec(c.moved(spec, v), chunk)[m] - chunk.x[m])
 
-    v, J, r = to_stationary_point(c.values(spec), lambda v: _jacobian(c.moved(spec, v), chunk, c, pool), residual,
+    v, J, r = to_stationary_point(c.values(spec), per_unit, residual,
                                   scale=lambda _v: c.scale, project=lambda v: np.clip(v, lo, hi),
                                   max_steps=max_steps, rel_decrease=1e-6, min_linear_decrease=_STATIONARY)
     spec = c.moved(spec, v)
