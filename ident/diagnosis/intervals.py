@@ -165,7 +165,7 @@ def _difference_jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns,
         sims = list(pool.map(lambda a: wsim(*a), jobs)) if pool is not None else [wsim(*a) for a in jobs]
         r = w * (simulate_spec(spec, chunk)[m] - chunk.x[m])
         J = np.column_stack([(sims[2 * k] - sims[2 * k + 1]) / 2.0 for k in range(len(c.cols))])
-        J /= c.steps[None, :]
+        J *= (c.scale / c.steps)[None, :]  # per unit of each column's scale, as _jacobian
     return J, r
 
 
