@@ -188,14 +188,16 @@ EFFECTS: dict[str, EffectEntry] = {e.name: e for e in (
                    0.0, places=(MODEL,)),
          Parameter("kind", "", "a filter on the recorded position or a two-mass mode inside the loop",
                    places=(MODEL,), choices=("output_filter", "two_mass"), form="word"),
-         Parameter("loop", "", "which mass a two-mass mode's loop reads", places=(MODEL,), choices=("table", "motor"),
-                   form="word"),
+         Parameter("loop", "", "which mass a two-mass mode's loop reads (and which is recorded)", places=(MODEL,),
+                   choices=("table", "motor", "motor_recorded"), form="word"),
          _AXIS),
         (Variant("kind", "output_filter", "a pole pair filtering the recorded position"),
          Variant("kind", "two_mass", "motor and table coupled by a spring-damper of that mode "
                  "(the virtual CNC's form)", _BOTH),
          Variant("loop", "table", "the loop reads the table (full-closed)", _BOTH),
-         Variant("loop", "motor", "the loop reads the motor, the table recorded (semi-closed)"))),
+         Variant("loop", "motor", "the loop reads the motor, the table recorded (semi-closed)"),
+         Variant("loop", "motor_recorded", "the loop reads the motor and the motor encoder is recorded "
+                 "(semi-closed): the mode shows only through the table's reaction on the motor"))),
     EffectEntry(
         "time_delay", "time delay", "pure dead time in actuation, feedback or capture", "delay_s",
         (Parameter("delay_s", "s", "the drive's dead time", 0.0, False, 1.0, required=True),

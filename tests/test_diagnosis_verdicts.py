@@ -24,25 +24,29 @@ from test_diagnosis_units import MODEL, THETA, Ts, point_to_point
 NOISE_MM = 5e-4
 
 
-def _mode_recording(seed: int, freq_hz: float | None, damping: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+def _mode_recording(seed: int, freq_hz: float | None, damping: float = 0.03,
+                    variant: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """3 s of the P-PI drive of Table 3.3 as a digital drive (the sampled controller, causal
-    feed-forward) with (or without: ``freq_hz`` None) a mode on the recorded position
-    (output filter), plus 0.5 µm of white encoder noise."""
+    feed-forward) with (or without: ``freq_hz`` None) a mode — on the recorded position
+    (output filter, ``variant`` 0) or of a two-mass drive (``variant`` 1–3, motor share
+    0.6) — plus 0.5 µm of white encoder noise."""
     x_r = point_to_point(seed)
     ep = np.zeros(N_EP)
     flags = np.zeros(6, dtype=np.int64)
     if freq_hz is not None:
         ep[EP_INDEX["freq_hz"]], ep[EP_INDEX["damping"]], ep[EP_INDEX["gain"]] = freq_hz, damping, 1.0
+        ep[EP_INDEX["motor_fraction"]] = 0.6
         flags[2] = 1
     modes = np.zeros(N_MODES, dtype=np.int64)
+    modes[3] = variant
     modes[4] = 2
     x = simulate_augmented(x_r, x_r, Ts, THETA, flags=flags, ep=ep, modes=modes)
     return x_r, x + NOISE_MM * np.random.default_rng(seed).standard_normal(x_r.size)
 
 
-def _diagnose(freq_hz: float | None, damping: float = 0.03):
-    x_r, x = _mode_recording(41, freq_hz, damping)
-    v_r, v = _mode_recording(42, freq_hz, damping)
+def _diagnose(freq_hz: float | None, damping: float = 0.03, variant: int = 0):
+    x_r, x = _mode_recording(41, freq_hz, damping, variant)
+    v_r, v = _mode_recording(42, freq_hz, damping, variant)
     return diagnose(x_r, x, Ts, MODEL, validation=(v_r, v, None), effects=("resonance",))
 
 
@@ -81,6 +85,16 @@ def test_an_accepted_mode_has_95_percent_intervals_that_hold_the_truth():
     # the words give each value with its interval and the share of the residual it removes
     assert "resonance at 40.0 Hz (" in d.summary and "damping 0.030 (" in d.summary, d.summary
     assert "of the held-out residual" in d.summary
+
+
+def test_a_mode_of_a_semi_closed_loop_recorded_on_the_motor_encoder_is_named_with_its_frequency():
+    # the loop and the recording both read the motor: the mode shows only through the
+    # table's reaction on the motor (resonance mode 3), as a controller's scope records it
+    d = _diagnose(40.0, 0.03, variant=3)
+    assert d.verdict == "resonance", d.summary
+    c = next(c for c in d.candidates if c.accepted)
+    assert c.parameters["freq_hz"] == pytest.approx(40.0, rel=0.10)
+    assert "seen on the motor encoder" in d.summary, d.summary
 
 
 def test_a_well_damped_pole_pair_is_not_named_a_resonance():

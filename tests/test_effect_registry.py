@@ -42,7 +42,7 @@ VARIANTS = [
     *(("backlash", {"gap_mm": 0.02, "motor_fraction": 0.6, "position_motor_share": 0.3}, m) for m in (0, 1, 2)),
     ("stribeck", {"static_to_coulomb_ratio": 2.0, "stribeck_velocity_mm_s": 1.5}, None),
     *(("resonance", {"freq_hz": 80.0, "damping": 0.03, "gain": 0.7, "motor_fraction": 0.6,
-                     "position_motor_share": 0.2}, m) for m in (0, 1, 2)),
+                     "position_motor_share": 0.2}, m) for m in (0, 1, 2, 3)),
     *(("time_delay", {"delay_s": 0.004}, m) for m in (0, 1)),
     *(("cyclic_error", {"period_mm": 4.0, "amplitude_sin": 3.0, "amplitude_cos": 4.0}, m) for m in (0, 1)),
     *(("saturation", {"limit": 1500.0, "position_motor_share": 0.4}, m) for m in (0, 1)),

@@ -33,7 +33,9 @@ resonance       a lightly damped pole pair, freq_hz [3], damping ζ [4]: mode 0 
                 recorded position ``q̈ + 2ζω q̇ + ω² q = −κ·ẍ``, recorded x + q, gain κ [5];
                 mode 1 the two-mass drive above with a spring-damper of that free-free mode;
                 mode 2 the same drive semi-closed: every loop term reads the motor, the
-                table is recorded (a table scale read beside a motor-encoder loop)
+                table is recorded (a table scale read beside a motor-encoder loop);
+                mode 3 semi-closed with the motor recorded (a controller's scope of a
+                motor-encoder loop): the mode shows only through the table's reaction
 time_delay      dead time ``delay_s`` [6] on the recorded position (mode 0: capture/transport)
                 or on the control-equivalent acceleration inside the loop (mode 1)
 cyclic_error    ``c_s·sin(2πx/P) + c_c·cos(2πx/P)``, period_mm P [7], c_s [8], c_c [9]; an error
@@ -295,7 +297,8 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     sa_windup = on_sa and modes[_MD_SATURATION] == 1
     bl_loop = on_bl and modes[_MD_BACKLASH] >= 1
     rs_two = on_rs and modes[_MD_RESONANCE] >= 1
-    fb_motor = (rs_two and modes[_MD_RESONANCE] == 2) or (bl_loop and modes[_MD_BACKLASH] == 2)
+    fb_motor = (rs_two and modes[_MD_RESONANCE] >= 2) or (bl_loop and modes[_MD_BACKLASH] == 2)
+    rec_motor = rs_two and modes[_MD_RESONANCE] == 3
     two = bl_loop or rs_two
     td_loop = on_td and modes[_MD_DELAY] == 1
     cy_force = on_cy and modes[_MD_CYCLIC] == 1
@@ -416,7 +419,9 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         u0 += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                     if two:
                         fc = (1.0 - mu[p]) * ak + lvl
-                        if fc.real != 0.0:
+                        if fc.real != 0.0 and rec_motor:
+                            xt[p] = xm[p] - div(fc, kc[p])  # the recorded state is the motor's
+                        elif fc.real != 0.0:
                             xm[p] = xt[p] + div(fc, kc[p]) + (half_c[p] if fc.real > 0.0 else -half_c[p])
                     elif on_bl:
                         sv = vr[k] if vr[k] != 0.0 else vk
@@ -443,7 +448,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 for i in range(nbuf[p]):
                     buf[p, i] = u0
                 bi[p] = 0
-            y = xt[p] if (on_bl or two) else xm[p]
+            y = xt[p] if (on_bl or two) and not rec_motor else xm[p]
             if on_rs and not rs_two:
                 y += q[p]
             if on_cy and not cy_force:
@@ -610,7 +615,8 @@ def simulate_augmented(
         Variant of backlash (0 semi-closed loop, 1 two-mass full-closed loop, 2 two-mass
         semi-closed loop), time delay
         (0 capture, 1 actuation), cyclic error (0 position error, 1 disturbance),
-        resonance (0 filter on the recorded position, 1 two-mass mode inside the loop),
+        resonance (0 filter on the recorded position, 1 two-mass mode inside the loop, 2 the
+        same semi-closed with the table recorded, 3 semi-closed with the motor recorded),
         controller (0 continuous, 1 sampled with zero-order hold, 2 the same with causal
         feed-forward differences) and saturation (0
         anti-windup, 1 none), slots :data:`MODE_SLOTS`; shorter arrays are padded with zeros.

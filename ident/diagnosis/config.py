@@ -79,6 +79,9 @@ class DiagnosisConfig:
     #: two-mass mode shows between f·√μ and f in closed loop, so its free-free frequency
     #: lies at or above the peak.
     peak_band: tuple[float, float] = (0.9, 1.4)
+    #: Start two-mass modes of a semi-closed loop whose recorded position is the motor
+    #: encoder (resonance mode 3: the mode shows only through the table's reaction).
+    motor_recorded_mode: bool = True
     #: A fitted two-mass mode is scanned along its ridge of equal locked-motor frequency
     #: (candidates.scan_motor_fraction) at these motor shares, spread over the bound of
     #: ``motor_fraction`` (0.2–0.98) …

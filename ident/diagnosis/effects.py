@@ -295,7 +295,9 @@ class Stribeck(Effect):
 class Resonance(Effect):
     """A lightly damped pole pair: a filter on the recorded position (mode 0) or the
     free-free mode of a two-mass drive inside the loop, closed on the table (mode 1) or on
-    the motor with the table recorded (mode 2)."""
+    the motor with the table recorded (mode 2) or with the motor recorded (mode 3: a
+    controller's scope of a motor-encoder loop, where the mode shows only through the
+    table's reaction on the motor)."""
 
     name = REGISTRY["resonance"].name
     added = 3
@@ -335,6 +337,8 @@ class Resonance(Effect):
             variants = [({"gain": 1.0}, 0)] + [({"motor_fraction": 0.8, "position_motor_share": p}, 1)
                                                for p in shares]
             variants.append(({"motor_fraction": 0.5, "position_motor_share": 0.0}, 2))
+            if cfg.motor_recorded_mode:
+                variants.append(({"motor_fraction": 0.5, "position_motor_share": 0.0}, 3))
             for extra, mode in variants:
                 s = base.with_effect(self.name, {"freq_hz": f, "damping": zeta, **extra}, mode)
                 s.box.update(box)
@@ -358,7 +362,7 @@ class Resonance(Effect):
     def set_arrays(self, p, ep, modes):
         ep[3], ep[4] = p["freq_hz"], p["damping"]
         if p.get("kind") == _variants(self.name, "kind")[1]:
-            modes[3] = 2 if p.get("loop") == _variants(self.name, "loop")[1] else 1
+            modes[3] = 1 + _variants(self.name, "loop").index(p.get("loop", _variants(self.name, "loop")[0]))
             ep[11] = p.get("motor_fraction", 0.5)
             ep[12] = p.get("position_motor_share", ep[12])
         else:
@@ -389,6 +393,8 @@ class Resonance(Effect):
         # a mode whose damping the data leave open is still an oscillation at that frequency
         what = "an oscillatory mode" if unresolved and "damping" in unresolved else self.called
         hz = _unit(self.name, "freq_hz")
+        if p.get("loop") == _variants(self.name, "loop")[2]:
+            what += " between motor and table, seen on the motor encoder,"
         if "locked_motor_hz" in p:
             return (f"{what} at {told(p, 'freq_hz', '.1f', hz, intervals, unresolved)} (free two-mass mode; the "
                     f"table rings at {told(p, 'locked_motor_hz', '.1f', hz, intervals, unresolved)} with the "
