@@ -158,6 +158,14 @@ class DiagnosisConfig:
     #: damping bound (bench_shooting_profile.py); a missed Stribeck curve predicts the
     #: held-out windows better (case_006: 5 %) but drifts in free run, which judges.
     shooting_window_s: float = 0.0
+    #: Judge on held-out windows (diagnose.evidence and every held-out condition of the
+    #: acceptance): when True the held-out residuals the acceptance rule reads are those of
+    #: the windows of ``shooting_window_s`` (k-step-ahead, each window simulated from the
+    #: recorded state, its restart state estimated — the same three nuisance states for the
+    #: reference and the candidate, so the degrees of freedom stay the effect's added
+    #: parameters); the free-run figures are told beside them.  Needs ``shooting_window_s``
+    #: > 0.  False: the free run judges, the windows figure is told beside it.
+    accept_on_windows: bool = False
     #: … each window restarting between this long and twice this long before its first
     #: scored sample (the lead-in, unscored, where a delay's history and what the estimated
     #: states leave — the side of a gap, stick or slip — settle) …
@@ -222,6 +230,8 @@ class DiagnosisConfig:
     def __post_init__(self) -> None:
         if self.fit_beta not in ("searches", "all", "none"):
             raise ValueError(f"fit_beta must be 'searches', 'all' or 'none', not {self.fit_beta!r}")
+        if self.accept_on_windows and not self.shooting_window_s > 0:
+            raise ValueError("accept_on_windows needs shooting_window_s > 0 (the windows' length)")
 
 
 DEFAULT = DiagnosisConfig()

@@ -344,12 +344,20 @@ def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None) -> np.
     )
 
 
-def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> np.ndarray:
+def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None, *,
+             shared_states: bool = False) -> np.ndarray:
     """Weighted free-run residual w·(x̂ − x) on ``mask`` (default the scored samples), mm;
-    on multiple-shooting windows with the restart states estimated (:func:`estimated_states`)."""
+    on multiple-shooting windows with the restart states estimated (:func:`estimated_states`).
+
+    ``shared_states``: estimate only the states every model's restart misreads (position,
+    velocity, the integral holding the acceleration), not a mode's free response — the same
+    nuisance parameters per window for a model with and without an effect, as the held-out
+    windows of the acceptance compare them (``DiagnosisConfig.accept_on_windows``).
+    """
     m = chunk.score if mask is None else mask
     r = chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
-    return estimated_states(r, spec.effects, spec.ep, spec.modes, chunk, restart_responses(spec, chunk, m), m)
+    effects = () if shared_states else spec.effects
+    return estimated_states(r, effects, spec.ep, spec.modes, chunk, restart_responses(spec, chunk, m), m)
 
 
 #: Offsets of a restart's position (mm), velocity (mm/s) and acceleration (mm/s²) whose
