@@ -428,7 +428,12 @@ def estimated_states(r: np.ndarray, effects: tuple[str, ...], ep: np.ndarray, mo
         h[:, i] = np.bincount(k, weights=B[:, i] * r, minlength=nw)
         for j in range(i, nc):
             G[:, i, j] = G[:, j, i] = np.bincount(k, weights=B[:, i] * B[:, j], minlength=nw)
-    coef = np.einsum("wij,wj->wi", np.linalg.pinv(G, rcond=1e-10, hermitian=True), h)
+    # columns equilibrated per window: a restart's responses (~1e-3) beside a mode's free
+    # response (~1e2) would otherwise fall below pinv's cut-off and be dropped
+    d = np.sqrt(np.einsum("wii->wi", G))
+    d = np.where(d > 0.0, d, 1.0)
+    Gs = G / (d[:, :, None] * d[:, None, :])
+    coef = np.einsum("wij,wj->wi", np.linalg.pinv(Gs, rcond=1e-10, hermitian=True), h / d) / d
     return r - np.einsum("si,si->s", B, coef[k])
 
 
