@@ -82,6 +82,9 @@ def test_a_clean_drive_judged_on_held_out_windows_gives_none():
     assert d.verdict == "none", d.summary
     c = next(c for c in d.candidates if c.effect == "stribeck")
     assert not c.accepted and c.score["held_out_scored_on"].startswith("windows")
+    # the words tell the free run's residual beside its fit
+    before, after = (1e3 * c.score[f"held_out_free_run_rms_{k}_mm"] for k in ("before", "after"))
+    assert f"residual rms {before:.3g} → {after:.3g} µm" in d.summary, d.summary
 
 
 def test_judging_on_windows_needs_the_windows_length():

@@ -1160,8 +1160,10 @@ def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candi
     best = max(cands, key=lambda c: c.fit_after_pct) if cands else None
     tail = ""
     if best is not None:
+        # the free run's rms beside its fit (judged on windows the score's own is the windows')
+        fr = "held_out_free_run_" if "held_out_free_run_rms_before_mm" in best.score else "held_out_"
         tail = (f" (best candidate {best.effect}: reference fit {_fit_words(best.fit_before_pct, best.fit_after_pct)}, "
-                f"{_rms_words(best.score['held_out_rms_before_mm'], best.score['held_out_rms_after_mm'])}, "
+                f"{_rms_words(best.score[fr + 'rms_before_mm'], best.score[fr + 'rms_after_mm'])}, "
                 f"not significant)")
     wh = loc.get("whiteness", {})
     white = "white" if wh.get("white") else "not white"
