@@ -165,15 +165,15 @@ class DiagnosisConfig:
     #: reference and the candidate, so the degrees of freedom stay the effect's added
     #: parameters); the free-run figures are told beside them.  Needs ``shooting_window_s``
     #: > 0.  False: the free run judges, the windows figure is told beside it.  Off because
-    #: it names one more, not two (bench_drive_zoo.py --config '{"shooting_window_s": 0.3,
+    #: it names no more (bench_drive_zoo.py --config '{"shooting_window_s": 0.3,
     #: "accept_on_windows": true}'): drive-zoo-dev 21/21 as main (case_014's delay without
-    #: the resonance shooting alone adds beside it), drive-zoo-dev2 21/28 against 20/28 —
-    #: case_015's mode named (main parameter +207 %: a 226 Hz two-mass fit, locked-motor
-    #: 101 Hz) but case_006's Stribeck drive named backlash (a 1.4 µm gap: 5.0 % of the
-    #: held-out windows' residual, −0.5 % in free run), its Stribeck fit −9 % on the windows;
-    #: false alarms 0/7.  On the windows six wrong effects pass alone that the free run
-    #: refuses (ranked behind the truth but for case_006).  1.28× the CPU of the default
-    #: (bench_diagnosis_speed.py --compare, shooting included).
+    #: the resonance shooting alone adds beside it), drive-zoo-dev2 20/28 as main but not
+    #: the same: case_014's saturation named resonance (a 14.7 Hz mode on the recorded
+    #: position, 7 % of the held-out windows' residual, −0.5 % in free run) where main says
+    #: none, case_015's mode none where main names a dead time; false alarms on clean cases
+    #: 0/7.  On the windows eight candidates of a wrong effect pass alone that the free run
+    #: refuses.  1.28× the CPU of the default (bench_diagnosis_speed.py --compare, shooting
+    #: included).
     accept_on_windows: bool = False
     #: … each window restarting between this long and twice this long before its first
     #: scored sample (the lead-in, unscored, where a delay's history and what the estimated
