@@ -55,7 +55,7 @@ from ident.diagnosis.candidates import (base_variants, fit_spec, refit_base, sea
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, TimeDelay, effect_parameters
 from ident.diagnosis.intervals import at_bound, effect_intervals
-from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, simulate_spec, sse
+from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
 from ident.model import BASE_KEYS, base_vector
@@ -206,12 +206,20 @@ def _fold_masks(starts: np.ndarray, blocks: int = 6) -> tuple[np.ndarray, np.nda
 @dataclass
 class _Scored:
     """Fold-fitted specs with their weighted (test_r) and raw (raw_r, mm) held-out residuals
-    and their weighted training costs (train_sse, one per fold)."""
+    and their weighted training costs (train_sse, one per fold).  The held-out residuals are
+    those the acceptance judges: the free run's, or with ``DiagnosisConfig.accept_on_windows``
+    the held-out windows' (k-step-ahead), the free run's then kept in ``free_run``."""
 
     specs: list[ModelSpec]
     test_r: list[np.ndarray]
     raw_r: list[np.ndarray]
     train_sse: list[float]
+    free_run: "_Scored | None" = None
+
+    @property
+    def free(self) -> "_Scored":
+        """The same models scored by the free run of the held-out data."""
+        return self if self.free_run is None else self.free_run
 
     @property
     def sse(self) -> float:
@@ -240,14 +248,15 @@ class _Scored:
 
 
 def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, pool: ThreadPoolExecutor, scored,
-                    cfg: DiagnosisConfig) -> "_Scored":
+                    cfg: DiagnosisConfig, test_sse: Callable[[ModelSpec, int], float]) -> "_Scored":
     """The reference model (effects ``keep`` only) with the lowest training cost per fold.
 
     Candidates for the reference: the given one (``scs[0]``) and a re-fit of it started
     from every other scored spec's parameters with the extra effects removed.  A re-fit
     that wins on training cost but predicts a fold's held-out data worse than the given
     one is not taken for that fold (a reference that is poor on held-out data would credit
-    any effect with the difference).  The re-fits are jobs of ``pool``.
+    any effect with the difference; ``test_sse(spec, fold)`` is the held-out cost the
+    acceptance judges by).  The re-fits are jobs of ``pool``.
     """
     ref = scs[0]
 
@@ -267,7 +276,7 @@ def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, pool: Th
     # the given reference's held-out cost per fold, as the ceiling of a replacement
     given = ref.fold_sse()
     for i, s1 in enumerate(best):
-        if s1 is not ref.specs[i] and not sse(s1, folds[i][1]) <= given[i]:
+        if s1 is not ref.specs[i] and not test_sse(s1, i) <= given[i]:
             best[i] = ref.specs[i]
     return ref if all(b is r for b, r in zip(best, ref.specs)) else scored(best)
 
@@ -720,27 +729,59 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         jobs = [pool.submit(fn, i, tr, te, *[l[i] for l in lists]) for i, (tr, te) in enumerate(folds)]
         return [j.result() for j in jobs]
 
+    # with multiple shooting on, each candidate is also scored on the held-out data in its
+    # windows, each simulated from the recorded state (k-step-ahead): told beside the
+    # free-run figure, which judges — or, with accept_on_windows, judging, the free-run
+    # figure told beside it
+    shots = ([te.shots(cfg.shooting_window_s, cfg.shooting_lead_s) for _, te in folds]
+             if cfg.shooting_window_s > 0 else [])
+
+    def window_residual(s: ModelSpec, i: int) -> np.ndarray:
+        # the restart states every model misreads, estimated per window for reference and
+        # candidate alike: shared nuisance parameters, no degree of freedom of the effect
+        return residual(s, shots[i], shared_states=True)
+
     def scored(specs: list[ModelSpec]) -> _Scored:
         # one simulation of each held-out chunk: the weighted residual (spec.residual) is
         # its raw residual times the chunk's weights
         raw = [simulate_spec(s, te)[te.score] - te.x[te.score] for s, (_, te) in zip(specs, folds)]
         rs = [te.w[te.score] * r for r, (_, te) in zip(raw, folds)]
-        return _Scored(specs, rs, raw, [sse(s, tr) for s, (tr, _) in zip(specs, folds)])
+        train = [sse(s, tr) for s, (tr, _) in zip(specs, folds)]
+        free = _Scored(specs, rs, raw, train)
+        if not cfg.accept_on_windows:
+            return free
+        ws = [window_residual(s, i) for i, s in enumerate(specs)]
+        # a window lies in one segment, whose weight is one number: its raw residual (mm,
+        # the states estimated in the weighted metric) is the weighted one over that weight
+        wraw = [r / sh.w[sh.score] for r, sh in zip(ws, shots)]
+        return _Scored(specs, ws, wraw, train, free_run=free)
+
+    def test_sse(s: ModelSpec, i: int) -> float:
+        if cfg.accept_on_windows:
+            r = window_residual(s, i)
+            with np.errstate(all="ignore"):
+                v = float(r @ r)
+            return v if math.isfinite(v) else math.inf
+        return sse(s, folds[i][1])
 
     def fit_of(sc: _Scored) -> float:
-        return _fit_pct(e_test, np.concatenate(sc.raw_r))
+        return _fit_pct(e_test, np.concatenate(sc.free.raw_r))
 
-    # with multiple shooting on, each candidate is also scored on the held-out data in its
-    # windows, each simulated from the recorded state (k-step-ahead): told beside the
-    # free-run figure, which alone judges
-    shots = ([te.shots(cfg.shooting_window_s, cfg.shooting_lead_s) for _, te in folds]
-             if cfg.shooting_window_s > 0 else [])
-
-    def with_shots(ev: dict, sc: _Scored, ref: _Scored) -> dict:
+    def with_shots(ev: dict, sc: _Scored, ref: _Scored, k: int) -> dict:
         if not shots:
             return ev
+        if cfg.accept_on_windows:  # the windows judged: the free run's figures beside them
+            fr = evidence(sc.free, ref.free, k, cfg)
+            return {**ev, "held_out_scored_on": f"windows of {cfg.shooting_window_s:g} s from the recorded state "
+                                                "(k-step-ahead)",
+                    "held_out_windows_s": cfg.shooting_window_s,
+                    "held_out_free_run_residual_reduction": _gain(sc.free, ref.free)[0],
+                    "held_out_free_run_likelihood_ratio": fr["likelihood_ratio"],
+                    "held_out_free_run_significant": fr["significant"],
+                    "held_out_free_run_rms_before_mm": ref.free.raw_rms,
+                    "held_out_free_run_rms_after_mm": sc.free.raw_rms}
         new, old = (sum(sse(s, sh) for s, sh in zip(x.specs, shots)) for x in (sc, ref))
-        return {**ev, "held_out_windows_s": cfg.shooting_window_s,
+        return {**ev, "held_out_scored_on": "free run", "held_out_windows_s": cfg.shooting_window_s,
                 "held_out_windows_residual_reduction": 1.0 - math.sqrt(new / old) if old > 0 else math.nan}
 
     if validation is not None:  # the training data are all the data: base is fitted already
@@ -777,7 +818,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     # carried the base parameters into a better one.  Re-fit the base model from every
     # candidate's base parameters (effect removed) and compare with the best base found,
     # so an effect is credited only with what the effect itself explains.
-    base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, pool, scored, cfg)
+    base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, pool, scored, cfg, test_sse)
     # the lag of sampling (at most a sample: TimeDelay.within_inherent_lag) is part of
     # the base, not an effect: when a dead time within it earns its parameter by
     # the acceptance rule, the base with that lag is the reference every effect must beat
@@ -789,7 +830,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         loc["reference"] = "base model with the lag of a digital loop"
     current_sc = base_sc
     loc["noise_floor_mm"] = noise
-    loc["held_out_rms_mm"] = base_sc.raw_rms
+    loc["held_out_rms_mm"] = base_sc.free.raw_rms
     for eff in effects:
         sc = singles[eff]
         ok, gain, folds_ok, ev, why = _judge(eff, sc, base_sc, full, noise, cfg)
@@ -797,7 +838,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         if ok and rank > best_gain:
             best_name, best_gain = eff, rank
         candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
-                                     sigs, [], why, base_sc.raw_rms, with_shots(ev, sc, base_sc), Ts=Ts, chunk=full,
+                                     sigs, [], why, base_sc.raw_rms, with_shots(ev, sc, base_sc, EFFECT_MODELS[eff].added), Ts=Ts, chunk=full,
                                      cfg=cfg))
     # 4. greedy forward selection: the best single effect, then a second on top of it
     chosen_first = best_name  # by the forward step, whatever order the verdict names them in
@@ -827,7 +868,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         pairs = {eff: scored([fit_pair(eff, i) for i in range(len(folds))]) for eff in others}
         if pairs:
             current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, pool,
-                                         scored, cfg)
+                                         scored, cfg, test_sse)
         for eff, sc in pairs.items():
             ok, gain, folds_ok, ev, why = _judge(eff, sc, current_sc, full, noise, cfg)
             round2.append((eff, sc, gain, folds_ok, ok, why, ev))
@@ -836,7 +877,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         for eff, sc, gain, folds_ok, ok, why, ev in round2:
             candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
                                          cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms,
-                                         with_shots(ev, sc, current_sc), Ts=Ts, chunk=full, cfg=cfg))
+                                         with_shots(ev, sc, current_sc, EFFECT_MODELS[eff].added), Ts=Ts, chunk=full, cfg=cfg))
         if best2 is not None:
             accepted.append(best2)
             current_sc = best2_sc
@@ -927,7 +968,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         verdict = named[0]
     else:
         verdict = list(named)
-    loc["held_out_rms_after_mm"] = current_sc.raw_rms
+    loc["held_out_rms_after_mm"] = current_sc.free.raw_rms
     mismatch = dict(loc)
     mismatch["signatures"] = sigs
     mismatch["held_out"] = scheme
@@ -1106,6 +1147,9 @@ def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candi
                                  c.unresolved if c else None)
             if c is not None:  # the evidence beside the statement
                 words += f", removing {100 * c.score['held_out_residual_reduction']:.0f} % of the held-out residual"
+                if "held_out_free_run_residual_reduction" in c.score:  # judged on the windows
+                    words += (f" over windows of {c.score['held_out_windows_s']:g} s from the recorded state "
+                              f"({100 * c.score['held_out_free_run_residual_reduction']:.0f} % in free run)")
             return words
 
         left = "; ".join(one(e) for e in accepted)
@@ -1116,8 +1160,10 @@ def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candi
     best = max(cands, key=lambda c: c.fit_after_pct) if cands else None
     tail = ""
     if best is not None:
+        # the free run's rms beside its fit (judged on windows the score's own is the windows')
+        fr = "held_out_free_run_" if "held_out_free_run_rms_before_mm" in best.score else "held_out_"
         tail = (f" (best candidate {best.effect}: reference fit {_fit_words(best.fit_before_pct, best.fit_after_pct)}, "
-                f"{_rms_words(best.score['held_out_rms_before_mm'], best.score['held_out_rms_after_mm'])}, "
+                f"{_rms_words(best.score[fr + 'rms_before_mm'], best.score[fr + 'rms_after_mm'])}, "
                 f"not significant)")
     wh = loc.get("whiteness", {})
     white = "white" if wh.get("white") else "not white"

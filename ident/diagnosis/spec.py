@@ -344,12 +344,20 @@ def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None) -> np.
     )
 
 
-def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> np.ndarray:
+def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None, *,
+             shared_states: bool = False) -> np.ndarray:
     """Weighted free-run residual w·(x̂ − x) on ``mask`` (default the scored samples), mm;
-    on multiple-shooting windows with the restart states estimated (:func:`estimated_states`)."""
+    on multiple-shooting windows with the restart states estimated (:func:`estimated_states`).
+
+    ``shared_states``: estimate only the states every model's restart misreads (position,
+    velocity, the integral holding the acceleration), not a mode's free response — the same
+    nuisance parameters per window for a model with and without an effect, as the held-out
+    windows of the acceptance compare them (``DiagnosisConfig.accept_on_windows``).
+    """
     m = chunk.score if mask is None else mask
     r = chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
-    return estimated_states(r, spec.effects, spec.ep, spec.modes, chunk, restart_responses(spec, chunk, m), m)
+    effects = () if shared_states else spec.effects
+    return estimated_states(r, effects, spec.ep, spec.modes, chunk, restart_responses(spec, chunk, m), m)
 
 
 #: Offsets of a restart's position (mm), velocity (mm/s) and acceleration (mm/s²) whose
@@ -420,7 +428,12 @@ def estimated_states(r: np.ndarray, effects: tuple[str, ...], ep: np.ndarray, mo
         h[:, i] = np.bincount(k, weights=B[:, i] * r, minlength=nw)
         for j in range(i, nc):
             G[:, i, j] = G[:, j, i] = np.bincount(k, weights=B[:, i] * B[:, j], minlength=nw)
-    coef = np.einsum("wij,wj->wi", np.linalg.pinv(G, rcond=1e-10, hermitian=True), h)
+    # columns equilibrated per window: a restart's responses (~1e-3) beside a mode's free
+    # response (~1e2) would otherwise fall below pinv's cut-off and be dropped
+    d = np.sqrt(np.einsum("wii->wi", G))
+    d = np.where(d > 0.0, d, 1.0)
+    Gs = G / (d[:, :, None] * d[:, None, :])
+    coef = np.einsum("wij,wj->wi", np.linalg.pinv(Gs, rcond=1e-10, hermitian=True), h / d) / d
     return r - np.einsum("si,si->s", B, coef[k])
 
 
