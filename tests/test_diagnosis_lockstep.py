@@ -19,6 +19,7 @@ VARIANTS = [
     ("resonance", {"freq_hz": 40.0, "damping": 0.05, "gain": 0.1}, 0),
     ("resonance", {"freq_hz": 40.0, "damping": 0.05, "motor_fraction": 0.7}, 1),
     ("resonance", {"freq_hz": 40.0, "damping": 0.05, "motor_fraction": 0.7}, 2),
+    ("resonance", {"freq_hz": 40.0, "damping": 0.05, "motor_fraction": 0.7}, 3),
     ("stribeck", {"static_to_coulomb_ratio": 2.0, "stribeck_velocity_mm_s": 1.0}, None),
     ("time_delay", {"delay_s": 0.0023}, 0),
     ("time_delay", {"delay_s": 0.0023}, 1),
