@@ -643,36 +643,14 @@ def simulate_augmented(
     if derivs is None:
         derivs = command_derivatives(x_r, Ts, starts)
     th = np.ascontiguousarray(theta, dtype=float)
-    fl = np.zeros(6, dtype=np.int64) if flags is None else np.ascontiguousarray(flags, dtype=np.int64)
+    fl = np.zeros(len(EFFECTS), dtype=np.int64) if flags is None else np.ascontiguousarray(flags, dtype=np.int64)
     e = np.zeros(N_EP) if ep is None else np.ascontiguousarray(ep, dtype=float)
-    md = np.zeros(N_MODES, dtype=np.int64) if modes is None else np.ascontiguousarray(modes, dtype=np.int64)
-    if md.size < N_MODES:
-        md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
-    if not (np.isfinite(th).all() and np.isfinite(e).all()) or e[_DELAY] < 0.0 or e[_DELAY] > 1.0:
+    md = np.zeros(N_MODES, dtype=np.int64) if modes is None else _padded_modes(modes)
+    if not _runnable(th.reshape(1, 8), e.reshape(1, N_EP))[0]:
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:
         nsub = model_substeps(th, Ts, fl, e, md)
-    out = np.empty((1, n))
-    out_u = np.empty((1, n))
-    _kernel_many(
-        x_r,
-        np.ascontiguousarray(derivs[0], dtype=float),
-        np.ascontiguousarray(derivs[1], dtype=float),
-        np.ascontiguousarray(x0, dtype=float),
-        np.ascontiguousarray(starts, dtype=np.bool_),
-        *_warm_arrays(warm, n),
-        float(Ts),
-        int(nsub),
-        th.reshape(1, 8),
-        fl,
-        e.reshape(1, N_EP),
-        md,
-        out,
-        out_u,
-    )
-    if u_out is not None:
-        u_out[:] = out_u[0]
-    return out[0]
+    return _many(x_r, x0, Ts, th, e, float, fl, md, starts, derivs, nsub, warm, u_out)[0]
 
 
 def simulate_augmented_many(
@@ -741,25 +719,41 @@ def sensitivities(
     return _many(x_r, x0, Ts, TH, E, complex, flags, modes, starts, derivs, nsub, warm).imag / COMPLEX_STEP
 
 
-def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, warm) -> np.ndarray:
-    """:func:`_kernel_many` on P sets of parameters of number type ``dtype`` (float or complex)."""
+def _padded_modes(modes: np.ndarray) -> np.ndarray:
+    """``modes`` as the kernel's int64 array of :data:`N_MODES` slots (a shorter one padded with zeros)."""
+    md = np.ascontiguousarray(modes, dtype=np.int64)
+    if md.size < N_MODES:
+        md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
+    return md
+
+
+def _runnable(TH: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """Per row, whether the parameters are a model to simulate: finite, the dead time in [0, 1] s
+    (a diverged fit step is not)."""
+    delay = E[:, _DELAY].real
+    return np.isfinite(TH).all(axis=1) & np.isfinite(E).all(axis=1) & (delay >= 0.0) & (delay <= 1.0)
+
+
+def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, warm,
+          u_out: np.ndarray | None = None) -> np.ndarray:
+    """:func:`_kernel_many` on P sets of parameters of number type ``dtype`` (float or complex);
+    rows that are no model to simulate (:func:`_runnable`) are NaN.  ``u_out`` (N,), one set
+    only: filled with the u the set applied."""
     x_r = np.ascontiguousarray(x_r, dtype=float)
     n = x_r.size
     TH = np.ascontiguousarray(thetas, dtype=dtype).reshape(-1, 8)
     E = np.ascontiguousarray(eps, dtype=dtype).reshape(-1, N_EP)
-    fl = np.ascontiguousarray(flags, dtype=np.int64)
-    md = np.ascontiguousarray(modes, dtype=np.int64)
-    if md.size < N_MODES:
-        md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
-    # the rows simulate_augmented would refuse (a diverged fit step) are NaN
-    delay = E[:, _DELAY].real
-    ok = np.isfinite(TH).all(axis=1) & np.isfinite(E).all(axis=1) & (delay >= 0.0) & (delay <= 1.0)
+    ok = _runnable(TH, E)
     y = np.empty((int(np.count_nonzero(ok)), n), dtype=dtype)
+    out_u = np.empty((y.shape[0], n) if u_out is not None else (0, 0), dtype=dtype)
     if y.shape[0]:
         _kernel_many(x_r, np.ascontiguousarray(derivs[0], dtype=float), np.ascontiguousarray(derivs[1], dtype=float),
                      np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(starts, dtype=np.bool_),
-                     *_warm_arrays(warm, n), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]), fl,
-                     np.ascontiguousarray(E[ok]), md, y, np.empty((0, 0), dtype=dtype))
+                     *_warm_arrays(warm, n), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]),
+                     np.ascontiguousarray(flags, dtype=np.int64), np.ascontiguousarray(E[ok]), _padded_modes(modes),
+                     y, out_u)
+        if u_out is not None:
+            u_out[:] = out_u[0]
     if ok.all():
         return y
     out = np.full((TH.shape[0], n), np.nan, dtype=dtype)
