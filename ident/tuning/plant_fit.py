@@ -32,6 +32,7 @@ import numpy as np
 from core.errors import InputError
 from core.recording import Recording
 from ident.least_squares import bounded_lm
+from ident.metrics import tracking_error_fit_pct
 from ident.tuning.controllers import Gains
 from ident.tuning.plant import Plant, form_timing, loop_response
 
@@ -83,8 +84,11 @@ def fit_plant(recording: Recording, axis: str, gains: Gains, start: Plant, Ts: f
     e = x_r - x
     norm = float(np.sqrt(np.mean((e - e.mean()) ** 2))) or 1.0
 
+    def response(z: np.ndarray) -> np.ndarray:
+        return loop_response(x_r, bounds, Ts, gains, timing, math.exp(z[0]), z[1], z[2], z[3], integration)
+
     def resid(z: np.ndarray) -> np.ndarray:
-        return (loop_response(x_r, bounds, Ts, gains, timing, math.exp(z[0]), z[1], z[2], z[3], integration) - x) / norm
+        return (response(z) - x) / norm
 
     # The box: kj within ×/÷ 4 of the coefficient match (which sets the gains' scale); the
     # friction within the output limit (a drive whose friction exceeds it cannot move).
@@ -94,8 +98,7 @@ def fit_plant(recording: Recording, axis: str, gains: Gains, start: Plant, Ts: f
     ub = np.array([math.log(start.kj) + math.log(4.0), max(2 * start.bj, start.kj * max(Kd, 1e-6), 50.0), d_max, 0.0])
     z0 = np.clip([math.log(start.kj), start.bj, start.d_plus, start.d_minus], lb, ub)
     z = bounded_lm(resid, z0, lb, ub, max_iter=40).z
-    r = resid(z) * norm
-    fit = 100.0 * (1.0 - float(np.linalg.norm(r)) / (norm * math.sqrt(r.size)))
+    fit = tracking_error_fit_pct(e, x_r - response(z))
     if not fit >= FIT_MIN_PCT:
         raise InputError.about("recording", f"{name}: the {gains.form} loop with the fitted plant reproduces "
                                             f"axis {axis}'s tracking error to {fit:.1f} % (< {FIT_MIN_PCT:.0f} %): "
