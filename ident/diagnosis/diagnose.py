@@ -838,8 +838,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         if ok and rank > best_gain:
             best_name, best_gain = eff, rank
         candidates.append(_candidate(eff, sc, fit_of(base_sc), fit_of(sc), ok, gain, cfg.min_relevant, folds_ok,
-                                     sigs, [], why, base_sc.raw_rms, with_shots(ev, sc, base_sc, EFFECT_MODELS[eff].added), Ts=Ts, chunk=full,
-                                     cfg=cfg))
+                                     sigs, [], why, base_sc.raw_rms, with_shots(ev, sc, base_sc, EFFECT_MODELS[eff].added),
+                                     Ts=Ts, chunk=full, cfg=cfg))
     # 4. greedy forward selection: the best single effect, then a second on top of it
     chosen_first = best_name  # by the forward step, whatever order the verdict names them in
     if best_name is not None:
@@ -877,7 +877,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         for eff, sc, gain, folds_ok, ok, why, ev in round2:
             candidates.append(_candidate(eff, sc, fit_of(current_sc), fit_of(sc), ok and eff == best2, gain,
                                          cfg.min_relevant, folds_ok, sigs, [best_name], why, current_sc.raw_rms,
-                                         with_shots(ev, sc, current_sc, EFFECT_MODELS[eff].added), Ts=Ts, chunk=full, cfg=cfg))
+                                         with_shots(ev, sc, current_sc, EFFECT_MODELS[eff].added),
+                                         Ts=Ts, chunk=full, cfg=cfg))
         if best2 is not None:
             accepted.append(best2)
             current_sc = best2_sc
