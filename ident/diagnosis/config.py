@@ -59,10 +59,11 @@ class DiagnosisConfig:
     #: A breakaway force within this ratio of Coulomb friction is no Stribeck effect at the
     #: scale eq. 3.2 resolves.
     min_static_ratio: float = 1.2
-    #: A resonance is fitted as a lightly damped mode: ζ at most this (a better-damped pole
-    #: pair is a filter the base model's poles already stand for).  It bounds the fit; a
-    #: fit that ends on it is no refusal — the held-out likelihood ratio judges the mode,
-    #: and its damping is told as not resolved (ident.diagnosis.intervals).
+    #: A resonance is fitted as a lightly damped mode: ζ at most this.  A fit held on it is
+    #: a better-damped pole pair the data want — a filter eq. 3.3's continuous loop lacks
+    #: against a digital controller — and is not named a resonance (what the name means,
+    #: effects.Resonance.implausible); a fit on the lower bound is a mode whose damping is
+    #: not resolved, and is told so.
     max_mode_damping: float = 0.15
     #: A position-periodic error must show at least this many whole periods over the travel
     #: recorded: less than one is a position map the data cannot tell from a slow drift.
