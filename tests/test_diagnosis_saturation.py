@@ -22,14 +22,14 @@ from tests.test_diagnosis_units import THETA, Ts, point_to_point
 FIX = Path(__file__).resolve().parents[1] / "fixtures" / "diagnosis"
 
 
-def clipped_run(x_r: np.ndarray, limit: float, slope: float, windup: bool = False):
-    """Eq. 3.3 (thesis Table 3.3's P-PI drive) with its output clipped; positions, u and speed."""
+def clipped_run(x_r: np.ndarray, limit: float, slope: float, windup: bool = False, theta: np.ndarray = THETA):
+    """Eq. 3.3 (thesis Table 3.3's P-PI drive by default) with its output clipped; positions, u and speed."""
     ep, flags, modes = np.zeros(N_EP), np.zeros(len(EFFECTS), dtype=np.int64), np.zeros(N_MODES, dtype=np.int64)
     ep[EP_INDEX["limit"]], ep[EP_INDEX["limit_slope"]] = limit, slope
     flags[EFFECTS.index("saturation")] = 1
     modes[MODE_SLOTS["saturation"]] = int(windup)
     u = np.empty(x_r.size)
-    y = simulate_augmented(x_r, x_r, Ts, THETA, flags=flags, ep=ep, modes=modes, nsub=8, u_out=u)
+    y = simulate_augmented(x_r, x_r, Ts, theta, flags=flags, ep=ep, modes=modes, u_out=u)
     return y, u, np.gradient(y, Ts)
 
 
@@ -82,3 +82,28 @@ def test_the_virtual_cnc_amplifier_limit_is_named_with_its_limit_and_viscous_slo
     p = next(c for c in d.candidates if c.accepted).parameters
     assert p["limit"] == pytest.approx(plant.K / plant.J * case["truth"]["limit"], rel=0.1)
     assert p["limit_slope"] == pytest.approx(plant.B / plant.J, rel=0.5)
+
+
+@pytest.mark.parametrize("windup", [True, False], ids=["winding_up", "frozen"])
+def test_a_long_recording_is_fitted_with_the_drive_limit_slope_and_integral(windup):
+    """14 s: long enough for the race to cut windows (2 × race_seconds), were the integral's
+    wound-up state readable at a restart; it is not, so saturation races on segments from
+    rest.  The drive with full feed-forward, clipped from about 90 mm/s on (top 150 mm/s)."""
+    from ident.diagnosis.augmented import segment_starts
+    from ident.diagnosis.candidates import search
+    from ident.diagnosis.config import DEFAULT
+    from ident.diagnosis.spec import ModelSpec, make_chunk, sse
+
+    theta = THETA.copy()
+    theta[3:6] = 1.0, theta[0], theta[1]  # b0, b1, b2: acceleration, velocity and position feed-forward
+    x_r = point_to_point(11, T=14.0, span=10.0, v_max=150.0, a_max=2500.0)
+    limit, c = 3200.0, 4.0
+    x, _, _ = clipped_run(x_r, limit, c, windup=windup, theta=theta)
+    x = x + np.random.default_rng(0).normal(0.0, 2e-5, x.size)
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    assert 2 * DEFAULT.race_seconds <= chunk.n * Ts
+    fit = search(ModelSpec(theta), "saturation", chunk, {}, DEFAULT)
+    assert fit.modes[MODE_SLOTS["saturation"]] == int(windup)
+    assert fit.ep[EP_INDEX["limit"]] == pytest.approx(limit, rel=0.02)
+    assert fit.ep[EP_INDEX["limit_slope"]] == pytest.approx(c, rel=0.1)
+    assert sse(fit, chunk) < 1e-3 * sse(ModelSpec(theta), chunk)
