@@ -240,6 +240,9 @@ EFFECTS: dict[str, EffectEntry] = {e.name: e for e in (
                    "(= K/J · limit_v)", 0.0, True, places=(MODEL,), required=True),
          Parameter("limit_unit", "", "unit of limit", places=(MODEL,), choices=("mm/s^2",),
                    form="word"),
+         Parameter("limit_slope", "1/s", "the limit falls by this much per mm/s of speed in the direction it "
+                   "pushes: the drive's output also carries the plant's viscous friction (or a voltage limit's "
+                   "back-EMF), which eq. 3.3 folds into a1", 0.0, places=(MODEL,)),
          _PSI,
          Parameter("anti_windup", "", "the integrators stop while the output is clipped", places=(MODEL,),
                    form="flag"),

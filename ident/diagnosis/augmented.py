@@ -40,10 +40,12 @@ time_delay      dead time ``delay_s`` [6] on the recorded position (mode 0: capt
                 or on the control-equivalent acceleration inside the loop (mode 1)
 cyclic_error    ``c_s·sin(2πx/P) + c_c·cos(2πx/P)``, period_mm P [7], c_s [8], c_c [9]; an error
                 of the recorded position in mm (mode 0) or a disturbance in mm/s² (mode 1)
-saturation      ``u`` clipped to ``±limit`` mm/s² [10].  Mode 0: integral frozen while it would
-                wind up (conditional integration); with ψ [12] > 0 the position term's
-                motor share is the integral of the motor velocity and freezes with it
-                (P-PI: the velocity integral stops).  Mode 1: no anti-windup — the
+saturation      ``u`` clipped to ``±limit − c·ẋ`` mm/s², limit [10], c = limit_slope [13]
+                (1/s): the drive clips its own output, ``u + c·ẋ``, which carries the
+                plant's viscous share of the speed term eq. 3.3 folds into a1.  Mode 0:
+                integral frozen while it would wind up (conditional integration); with
+                ψ [12] > 0 the position term's motor share is the integral of the motor
+                velocity and freezes with it (P-PI: the velocity integral stops).  Mode 1: no anti-windup — the
                 integral runs on while the output is clipped, as in many drives' PI
                 velocity loops, and overshoots once the limit lets go
 ==============  =========================================================================
@@ -124,8 +126,9 @@ EP_INDEX: dict[str, int] = {
     "limit": 10,
     "motor_fraction": 11,
     "position_motor_share": 12,
+    "limit_slope": 13,
 }
-N_EP = 13
+N_EP = 14
 #: Variant slots of the ``modes`` vector: backlash, time_delay, cyclic_error, resonance,
 #: controller (0 continuous, 1 sampled, 2 sampled with causal feed-forward differences),
 #: saturation (0 anti-windup, 1 none).
@@ -152,10 +155,10 @@ _FL_BACKLASH, _FL_STRIBECK, _FL_RESONANCE, _FL_DELAY, _FL_CYCLIC, _FL_SATURATION
     EFFECTS.index(e) for e in ("backlash", "stribeck", "resonance", "time_delay", "cyclic_error", "saturation"))
 _MD_BACKLASH, _MD_DELAY, _MD_CYCLIC, _MD_RESONANCE, _MD_CONTROLLER, _MD_SATURATION = (
     MODE_SLOTS[k] for k in ("backlash", "time_delay", "cyclic_error", "resonance", "controller", "saturation"))
-_GAP, _RATIO, _VS, _FREQ, _DAMPING, _GAIN, _DELAY, _PERIOD, _SIN, _COS, _LIMIT, _MOTOR, _PSI = (
+_GAP, _RATIO, _VS, _FREQ, _DAMPING, _GAIN, _DELAY, _PERIOD, _SIN, _COS, _LIMIT, _MOTOR, _PSI, _LSLOPE = (
     EP_INDEX[k] for k in ("gap_mm", "static_to_coulomb_ratio", "stribeck_velocity_mm_s", "freq_hz", "damping", "gain",
                           "delay_s", "period_mm", "amplitude_sin", "amplitude_cos", "limit", "motor_fraction",
-                          "position_motor_share"))
+                          "position_motor_share", "limit_slope"))
 
 
 def segment_starts(n: int, segment: np.ndarray | None) -> np.ndarray:
@@ -323,6 +326,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     cs = np.empty_like(a1)
     cc = np.empty_like(a1)
     lim = np.empty_like(a1)
+    lsl = np.empty_like(a1)
     mu = np.empty_like(a1)
     psi = np.empty_like(a1)
     kc = np.empty_like(a1)
@@ -344,6 +348,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
         cs[p] = ep[_SIN]
         cc[p] = ep[_COS]
         lim[p] = ep[_LIMIT]
+        lsl[p] = ep[_LSLOPE]
         m_ = ep[_MOTOR] if ep[_MOTOR].real > 0.0 else 1.0
         psi[p] = ep[_PSI]
         if two:
@@ -484,11 +489,15 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         if on_sa:
                             ig = (xr[k] - xfb if psi[p].real == 0.0
                                   else a3[p] * (xr[k] - xfb) - psi[p] * a2[p] * vfb)
-                            if uh.real > lim[p].real:
-                                uh = lim[p]
+                            # the drive's own output clipped: it carries the viscous
+                            # share of the speed term eq. 3.3 folds into a1
+                            hi = lim[p] - lsl[p] * vfb
+                            lo = -lim[p] - lsl[p] * vfb
+                            if uh.real > hi.real:
+                                uh = hi
                                 wh = sa_windup or ig.real <= 0.0
-                            elif uh.real < -lim[p].real:
-                                uh = -lim[p]
+                            elif uh.real < lo.real:
+                                uh = lo
                                 wh = sa_windup or ig.real >= 0.0
                         if wh:
                             ei[p] = ei_new
@@ -507,11 +516,13 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     wind_x[p] = True
                     if on_sa:
                         ig = xrj - xfb if psi[p].real == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * v[p]
-                        if u.real > lim[p].real:
-                            u = lim[p]
+                        hi = lim[p] - lsl[p] * v[p]
+                        lo = -lim[p] - lsl[p] * v[p]
+                        if u.real > hi.real:
+                            u = hi
                             wind = sa_windup or ig.real <= 0.0
-                        elif u.real < -lim[p].real:
-                            u = -lim[p]
+                        elif u.real < lo.real:
+                            u = lo
                             wind = sa_windup or ig.real >= 0.0
                         wind_x[p] = wind
                 if want_u and j == 0:

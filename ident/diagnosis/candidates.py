@@ -285,7 +285,8 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     starts = [s for b in (base,) + tuple(others) for s in EFFECT_MODELS[effect].starts(b, chunk, evidence, cfg)]
     # 2. screen: free-run cost with the base held (diverging starts drop out), on what the
     # race's last round sees
-    look = race_part(chunk, 1.0, cfg)
+    restart = EFFECT_MODELS[effect].restartable
+    look = race_part(chunk, 1.0, cfg, restart)
     costs = [sse(s, look) for s in starts]
     alive = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
     if not alive:
@@ -293,7 +294,7 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     # 3. race: joint fits on a growing share of race_seconds of the recording (of all of it
     # when 0), the worse half dropped after each round
     for r, (frac, it) in enumerate(zip(cfg.race_fidelity, cfg.race_iter)):
-        part = race_part(chunk, frac, cfg)
+        part = race_part(chunk, frac, cfg, restart)
         nfev = cfg.race_evals[r] if cfg.race_evals else 0
         alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, secant_nfev=nfev,
                           search=True, cfg=cfg)
@@ -307,16 +308,17 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     return EFFECT_MODELS[effect].finish(best, chunk, cfg)
 
 
-def race_part(chunk: Chunk, frac: float, cfg: DiagnosisConfig) -> Chunk:
+def race_part(chunk: Chunk, frac: float, cfg: DiagnosisConfig, restart: bool = True) -> Chunk:
     """What a race round at fidelity ``frac`` fits on: ``frac`` × ``cfg.race_seconds`` of
     windows spread over the whole recording (warm restarts), or the first ``frac`` of every
     segment (:meth:`Chunk.part`; all of it at 1).
 
     Windows only where they cut the work at least in half: on a recording barely longer
     than race_seconds they cost what it costs and only add restarts (a 6.8 s LinuxCNC
-    capture lost its 20 µm gap to them).
+    capture lost its 20 µm gap to them); and only for models whose state a restart can
+    read from the recording (``restart``, :attr:`Effect.restartable`).
     """
-    if 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts:
+    if restart and 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts:
         return chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
     return chunk.part(frac)
 

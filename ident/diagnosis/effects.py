@@ -96,6 +96,9 @@ class Effect:
     #: 16 sub-steps a sample: their searches take 3-5x the others' and are started first,
     #: so the diagnosis's two worker threads end together
     two_mass: bool = False
+    #: the model's whole state can be read from the recording at a restart mid-move
+    #: (:meth:`~ident.diagnosis.spec.Chunk.windows`): its search may race on windows
+    restartable: bool = True
 
     def free(self, spec: ModelSpec) -> list[str]:
         raise NotImplementedError
@@ -592,37 +595,70 @@ class Saturation(Effect):
     name = REGISTRY["saturation"].name
     added = 1
 
+    added = 2
+    #: an integral wound up while the output is clipped is a state no recording shows: a
+    #: window restarted mid-move sets it to hold the recorded acceleration, so the variant
+    #: without anti-windup ties with the frozen one there and loses the race it would win
+    #: in free run (drive-zoo-dev2 case_003: 0.085 against 0.037 of the base's cost after
+    #: the race on windows, 0.001 against 0.003 fitted in free run); its search races on
+    #: the first part of every segment from rest instead
+    restartable = False
+    #: 1/s: a slope started at 0 moves by steps of this scale; a viscous share of 1/s
+    #: tilts the limit by 0.1 % of a 1000 mm/s² limit per mm/s
+    scale_floor = {"limit_slope": 1.0}
+
     def free(self, spec):
-        return ["limit"]
+        return ["limit", "limit_slope"]
 
     def bounds(self, name, p0, chunk, cfg):
+        if name == "limit_slope":
+            # a limit falling by more than ten times the largest acceleration over the top
+            # speed is gone long before it: no limit the recording reached
+            return 0.0, 10.0 * _amax(chunk) / _vmax(chunk)
         return 1e-3 * _amax(chunk), 100.0 * _amax(chunk)
 
     def starts(self, base, chunk, evidence, cfg):
         u = np.empty(chunk.n)
         simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, base.theta, flags=base.flags(), ep=base.ep,
                            modes=base.modes, starts=chunk.starts, derivs=chunk.derivs, u_out=u, warm=chunk.warm)
-        au = np.abs(u[np.isfinite(u)])
+        ok = np.isfinite(u)
+        u, v = u[ok], chunk.derivs[0][ok]
         # ψ: the share of the position term that is the integral of the motor velocity —
         # 0 for a PID, about 0.8 for a P-PI cascade (it stops or runs on with the integral)
         psis = dict.fromkeys((0.0,) + motor_shares(base.theta))
-        return [base.with_effect(self.name, {"limit": float(np.percentile(au, q)), "position_motor_share": psi}, w)
-                for q in (99.9, 99.0, 96.0) for psi in psis for w in (0, 1)]
+        # the drive clips its own output, u + c·ẋ: eq. 3.3's u less the plant's viscous
+        # share c of the speed term (a current limit on a plant with viscous friction, or a
+        # voltage limit's back-EMF), so the limit of u falls with speed in the direction it
+        # pushes.  c is invisible to eq. 3.3 (it sits in a1) until the clip bites: started
+        # at 0 and where the limit falls by a quarter of itself at the top speed recorded
+        c0 = float(np.percentile(np.abs(u), 99.0)) / _vmax(chunk)
+        out = []
+        for share in (0.0, 0.25):
+            c = share * c0
+            au = np.abs(u + c * v)
+            out += [base.with_effect(self.name, {"limit": float(np.percentile(au, q)), "limit_slope": c,
+                                                 "position_motor_share": psi}, w)
+                    for q in (99.9, 99.0, 96.0) for psi in psis for w in (0, 1)]
+        return out
 
     def parameters(self, spec, Ts=None):
         return {"limit": float(spec.ep[10]), "limit_unit": REGISTRY[self.name].parameter("limit").unit,
-                "position_motor_share": float(spec.ep[12]),
+                "limit_slope": float(spec.ep[13]), "position_motor_share": float(spec.ep[12]),
                 "anti_windup": _variants(self.name, "anti_windup")[int(spec.modes[5])]}
 
     def set_arrays(self, p, ep, modes):
         ep[10] = p["limit"]
+        ep[13] = p.get("limit_slope", 0.0)
         ep[12] = p.get("position_motor_share", ep[12])
         modes[5] = _variants(self.name, "anti_windup").index(bool(p.get("anti_windup", True)))
 
     def words(self, p, intervals=None, unresolved=None):
         # the limit of the control-equivalent acceleration, not of an amplifier's volts
+        slope = p.get("limit_slope", 0.0)
         return (f"saturation of the control-equivalent acceleration, limit "
                 f"{self.said(p, 'limit', '.4g', intervals, unresolved)}"
+                + (f" at rest, falling by {self.said(p, 'limit_slope', '.3g', intervals, unresolved)} "
+                   "per mm/s of speed" if slope > 0.0 else "")
                 + ("" if p.get("anti_windup", True) else ", integral winding up while clipped"))
 
     def signature(self, loc):
