@@ -6,17 +6,19 @@ of :class:`~ident.diagnosis.effects.Backlash` started), then the profile of the 
 free-run cost (eq. 3.6) over the gap: for every variant (0 massless table, 1 two-mass
 full-closed, 2 two-mass semi-closed) and every gap of ``--ratios`` × the label, the model
 re-fitted with the gap held (``--iter`` iterations, everything else free: θ of eq. 3.3,
-the motor share), started from the search's model (its variant, or switched to the other
-one).  Printed per point: the cost relative to the search's, and the residual rms over the
+the motor share, and in variant 1 the position term's motor share ψ as the accepted
+model's re-estimation frees it, :func:`~ident.diagnosis.candidates.profile_gap`; with
+``--hold-psi`` ψ stays at the search's reading of θ, as in the search), started from the
+search's model (its variant, or switched to the other one).  Printed per point: the cost relative to the search's, and the residual rms over the
 slow part of the recording (before the command first exceeds ``--slow`` mm/s: the
 low-speed set of tiny moves) and over the rest.  If the fit stopped short of a minimum at
 the label (a bound, ripple, a weighting that favours the slow part), the profile shows it
-there; if every variant's profile rises towards the label in both parts, the model
-structure holds a smaller gap than the drive's.  A DEVELOPMENT figure (the zoos the
+there; if every variant's profile rises towards the label in both parts, the model —
+its structure, or a parameter it holds (``--hold-psi``) — puts the gap elsewhere.  A DEVELOPMENT figure (the zoos the
 diagnosis is tuned on).
 
     python benchmarks/bench_gap_profile.py [--zoo ../shared/data/drive-zoo-dev2]
-        [--cases case_001] [--ratios 0.5,0.7,0.85,1,1.2] [--variants 0,1,2]
+        [--cases case_001] [--ratios 0.5,0.7,0.85,1,1.2] [--variants 0,1,2] [--hold-psi]
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
-def profile(zoo: Path, case: dict, ratios: list[float], variants: list[int], iters: int, slow: float) -> list[str]:
+def profile(zoo: Path, case: dict, ratios: list[float], variants: list[int], iters: int, slow: float,
+            hold_psi: bool) -> list[str]:
     from benchmarks._zoo_search import zoo_search
     from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS
     from ident.diagnosis.candidates import fit_spec
@@ -67,11 +70,12 @@ def profile(zoo: Path, case: dict, ratios: list[float], variants: list[int], ite
                     s0.ep[i_mu] = 0.5
             g = r * truth
             s0.ep[i_g] = g
-            s1 = fit_spec(s0, full, max_iter=iters, bounds={"gap_mm": (0.999 * g, 1.001 * g)}, cfg=cfg)
+            s1 = fit_spec(s0, full, max_iter=iters, bounds={"gap_mm": (0.999 * g, 1.001 * g)},
+                          also_free=() if hold_psi else ("position_motor_share",), cfg=cfg)
             c = sse(s1, full)
             costs.append(c)
             lines.append(f"    variant {mode}  gap {r:4.2f} × truth: cost {c / c_fit:7.3f} × the search's   "
-                         f"motor share {s1.ep[i_mu]:.2f}   d0 {s1.theta[6]:8.1f} d1 {s1.theta[7]:8.1f} mm/s²   "
+                         f"motor share {s1.ep[i_mu]:.2f}  ψ {s1.ep[i_psi]:.2f}   d0 {s1.theta[6]:8.1f} d1 {s1.theta[7]:8.1f} mm/s²   "
                          f"rms µm slow / fast {rms_um(simulate_spec(s1, full) - x)}")
         lines.append(f"    variant {mode}: lowest cost at {ratios[int(np.argmin(costs))]:.2f} × the truth")
     return lines
@@ -85,6 +89,7 @@ def main() -> None:
     ap.add_argument("--variants", default="0,1,2", help="backlash variants profiled")
     ap.add_argument("--iter", type=int, default=15, help="iterations of each held-gap fit")
     ap.add_argument("--slow", type=float, default=10.0, help="mm/s: the command speed that ends the slow part")
+    ap.add_argument("--hold-psi", action="store_true", help="hold ψ at the search's reading (as the search does)")
     args = ap.parse_args()
     zoo = Path(args.zoo)
     if not (zoo / "labels.json").exists():
@@ -95,7 +100,7 @@ def main() -> None:
     ratios = [float(v) for v in args.ratios.split(",")]
     variants = [int(v) for v in args.variants.split(",")]
     for c in cases:
-        print("\n".join(profile(zoo, c, ratios, variants, args.iter, args.slow)), flush=True)
+        print("\n".join(profile(zoo, c, ratios, variants, args.iter, args.slow, args.hold_psi)), flush=True)
 
 
 if __name__ == "__main__":
