@@ -27,28 +27,14 @@ sys.path.insert(0, str(ROOT))
 
 
 def profile(zoo: Path, case: dict, window: float, dampings: list[float]) -> list[str]:
-    import ident
+    from benchmarks._zoo_search import zoo_search
     from ident.diagnosis.augmented import EP_INDEX
-    from ident.diagnosis.candidates import fit_spec, search
+    from ident.diagnosis.candidates import fit_spec
     from ident.diagnosis.config import DEFAULT
-    from ident.diagnosis.diagnose import _theta, fit_base
-    from ident.diagnosis.candidates import base_variants
-    from ident.diagnosis.residuals import localise
-    from ident.diagnosis.spec import ModelSpec, make_chunk, simulate_spec, sse
-    from ident.diagnosis.augmented import segment_starts
+    from ident.diagnosis.spec import sse
 
     cfg = dataclasses.replace(DEFAULT, shooting_window_s=window)
-    rec = ident.load(zoo / case["recording"])
-    res = ident.identify(rec, diagnose=False)
-    ax = next(iter(rec.axes.values()))
-    x_r, x = ax.commanded - ax.actual[0], ax.actual - ax.actual[0]  # positions from the first sample
-    Ts = rec.sample_period
-    starts = segment_starts(x_r.size, rec.segment)
-    full = make_chunk(x_r, x, Ts, starts)
-    base = fit_base(ModelSpec(_theta(next(iter(res.axes.values())).model)), full, cfg=cfg)
-    base, other = base_variants(base, full, cfg=cfg)[:2]
-    loc = localise(simulate_spec(base, full) - x, x_r, x, *full.derivs, Ts, starts)
-    fit = search(base, "resonance", full, loc, cfg, others=(other,))
+    fit, _base, full = zoo_search(zoo, case, "resonance", cfg)
     shots = full.shots(window, cfg.shooting_lead_s)
     c_shot, c_free = sse(fit, shots), sse(fit, full)
     i_f, i_z, i_mu = EP_INDEX["freq_hz"], EP_INDEX["damping"], EP_INDEX["motor_fraction"]

@@ -726,6 +726,32 @@ def test_a_backlash_gap_started_off_by_half_moves_to_the_true_gap(x_r, start_gap
     assert sse(fitted, chunk) < 0.02 * sse(start, chunk)
 
 
+def test_a_full_closed_gap_is_sized_with_the_position_terms_motor_share_fitted_beside_it():
+    # a full-closed drive across a 20 µm gap whose position term reads the motor in part
+    # (ψ = 0.25); the search holds ψ at a reading of θ (here 0.85), and the gap trades with
+    # it: held there the fit sizes the gap about half.  The accepted model's profile over
+    # the gap, ψ fitted beside it (candidates.profile_gap), must size it within 25 %.
+    from ident.diagnosis.candidates import profile_gap
+
+    x_r = point_to_point(3)
+    ep = np.zeros(N_EP)
+    ep[EP_INDEX["gap_mm"]] = 0.02
+    ep[EP_INDEX["motor_fraction"]] = 0.5
+    ep[EP_INDEX["position_motor_share"]] = 0.25
+    modes = np.array([1, 0, 0, 0, 1])  # two-mass full-closed backlash, sampled controller
+    x = simulate_augmented(x_r, x_r, Ts, THETA, flags=np.array([1, 0, 0, 0, 0, 0]), ep=ep, modes=modes)
+    x = x + np.random.default_rng(0).normal(0.0, 2e-4, x.size)
+    chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))
+    start = ModelSpec(THETA.copy(), ("backlash",), ep.copy())
+    start.modes[: modes.size] = modes
+    start.ep[EP_INDEX["position_motor_share"]] = 0.85
+    held = fit_spec(start, chunk, cfg=DEFAULT)
+    assert held.ep[EP_INDEX["gap_mm"]] < 0.75 * 0.02  # the bias the profile cures
+    profiled = profile_gap(held, chunk, DEFAULT)
+    assert profiled.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.25)
+    assert sse(profiled, chunk) < sse(held, chunk)
+
+
 def test_the_search_finds_a_gap_the_base_model_has_absorbed(x_r):
     # the search starts from a base identified without the gap, which has taken part of
     # it up (Coulomb offset, integral gain): base and gap must move back together

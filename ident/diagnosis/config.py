@@ -224,6 +224,11 @@ class DiagnosisConfig:
     segment_variance_iter: int = 10
     #: … until no segment's weight moves by more than this share.
     segment_variance_tol: float = 0.05
+    #: An accepted gap is then profiled (candidates.profile_gap): the model re-fitted with
+    #: the gap held at these multiples of the fitted one (0: none) …
+    gap_profile_ratios: tuple[float, ...] = (0.7, 1.3, 1.7)
+    #: … for this many iterations each.
+    gap_profile_iter: int = 10
 
     # -- a weakly determined dead time (candidates.centre_delay) ------------------------
     #: Delays whose training cost lies within this share of the best fit equally well (2 %

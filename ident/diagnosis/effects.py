@@ -103,6 +103,11 @@ class Effect:
     def free(self, spec: ModelSpec) -> list[str]:
         raise NotImplementedError
 
+    def releasable(self, spec: ModelSpec) -> list[str]:
+        """Parameters the search holds at its starts' readings that a fit may free
+        (``fit_spec(also_free=)``): none unless the effect says."""
+        return []
+
     def bounds(self, name: str, p0: float, chunk: Chunk, cfg: DiagnosisConfig) -> tuple[float, float]:
         if name == "motor_fraction":
             return 0.2, 0.98
@@ -186,7 +191,7 @@ class Backlash(Effect):
     name = REGISTRY["backlash"].name
     added = 2
     two_mass = True
-    scale_floor = {"gap_mm": 1e-3}
+    scale_floor = {"gap_mm": 1e-3, "position_motor_share": 0.1}
     #: over the gap the cost is a parabola with ±20 % ripple at 0.1 % steps (contacts on
     #: sub-step boundaries): with 0.1 % differences the gap never moves from its start
     fd_step = {"gap_mm": 0.03}
@@ -196,8 +201,13 @@ class Backlash(Effect):
     def free(self, spec):
         return ["gap_mm", "motor_fraction"] if self.variant(spec) >= 1 else ["gap_mm"]
 
+    def releasable(self, spec):
+        # the full-closed loop's position term: its motor share ψ is started at the
+        # readings of θ (motor_shares) and held by the search, but it trades with the gap
+        return ["position_motor_share"] if self.variant(spec) == 1 else []
+
     def bounds(self, name, p0, chunk, cfg):
-        return (0.0, 1.0) if name == "gap_mm" else super().bounds(name, p0, chunk, cfg)
+        return (0.0, 1.0) if name in ("gap_mm", "position_motor_share") else super().bounds(name, p0, chunk, cfg)
 
     def starts(self, base, chunk, evidence, cfg):
         shares = motor_shares(base.theta)
