@@ -88,6 +88,7 @@ from numba import njit
 
 from ident.axis_model import CONTROLLERS, EFFECT_NAMES
 from ident.complex_step import cos, div, exp, sin
+from ident.discretisation import foh_blocks
 
 __all__ = [
     "EFFECTS",
@@ -269,7 +270,33 @@ def _delay_output(out, starts, tau, Ts):
 
 
 @njit(cache=True, nogil=True)
-def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, modes, OUT, OUT_U):
+def _clipped(u, lim, ig, windup):
+    """``u`` clipped to ±``lim`` (saturation) and whether the integral runs on: always with
+    ``windup``, else only while its error ``ig`` would not wind the clip up (conditional
+    integration)."""
+    if u.real > lim.real:
+        return lim, windup or ig.real <= 0.0
+    if u.real < -lim.real:
+        return -lim, windup or ig.real >= 0.0
+    return u, True
+
+
+@njit(cache=True, nogil=True)
+def _loop_delayed(buf, bi, p, u, dsteps, nb):
+    """``u`` into set ``p``'s ring buffer of sub-step values and, out of it, the u of ``dsteps``
+    sub-steps ago (linear between sub-steps): the dead time inside the loop."""
+    buf[p, bi[p]] = u
+    ip = int(dsteps.real)
+    fr = dsteps - ip
+    i0 = (bi[p] - ip) % nb
+    i1 = (bi[p] - ip - 1) % nb
+    bi[p] = (bi[p] + 1) % nb
+    return (1.0 - fr) * buf[p, i0] + fr * buf[p, i1]
+
+
+@njit(cache=True, nogil=True)
+def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, modes, OUT, OUT_U, load,
+                 start_rule):
     """The free run of eq. 3.3 and the effects of :data:`EFFECTS` for P parameter sets in lockstep.
 
     Rows of ``TH`` (P, 8) and ``EP`` (P, 13) are the sets, rows of ``OUT`` and ``OUT_U`` (P, N)
@@ -380,6 +407,23 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     first = np.ones(P, dtype=np.bool_)
     u_h = np.zeros_like(a1)
     u_last = np.zeros_like(a1)
+    # The exact step (single mass, continuous controller): per set the first-order-hold blocks
+    # of eq. 3.3's linear part over a sub-step, the Karnopp state (1 moving +, −1 moving −,
+    # 0 stuck), the command drive at the sample and its slope, and whether any effect adds a
+    # held input.
+    exact = not two and not sampled
+    PH = np.zeros((P, 3, 3), dtype=TH.dtype)
+    GA = np.zeros((P, 3, 2), dtype=TH.dtype)
+    GB = np.zeros((P, 3, 2), dtype=TH.dtype)
+    dir_ = np.zeros(P, dtype=np.int64)
+    extra = np.zeros(P, dtype=np.bool_)
+    if exact:
+        for p in range(P):
+            Phi_, G0_, G1_ = foh_blocks(a1[p], a2[p], a3[p], h)
+            PH[p] = Phi_
+            GA[p] = G0_
+            GB[p] = G1_
+            extra[p] = on_sa or td_loop or cy_force or psi[p].real != 0.0
     for k in range(n):
         last = k == n - 1 or starts[k + 1]
         for p in range(P):
@@ -393,6 +437,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 q[p] = 0.0
                 qd[p] = 0.0
                 ei[p] = (a2[p] * xm[p] - b2[p] * xr[k]) / a3[p] if a3[p].real != 0.0 else 0.0
+                dir_[p] = 0
                 vb[p] = 0.0
                 vb_prev[p] = 0.0
                 u0 = 0.0
@@ -406,8 +451,11 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     if on_cy and not cy_force:
                         xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                         xt[p] = xm[p]
-                    v[p] = vk - 0.5 * h * ak
+                    # Euler's velocities live at half sub-steps; the exact step's at the sub-step.
+                    v[p] = vk if exact else vk - 0.5 * h * ak
                     vt[p] = v[p]
+                    if exact and vk.real != 0.0:
+                        dir_[p] = 1 if vk.real > 0.0 else -1
                     lvl = 0.0
                     if vk.real != 0.0:
                         lvl = d0[p] if vk.real > 0.0 else d1[p]
@@ -448,6 +496,10 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 for i in range(nbuf[p]):
                     buf[p, i] = u0
                 bi[p] = 0
+                if start_rule == 1:  # the identification's start (ident.simulation): z = 0, ẋ = ẋ_r
+                    ei[p] = 0.0
+                    v[p] = vr[k]
+                    dir_[p] = 1 if vr[k] > 0.0 else (-1 if vr[k] < 0.0 else 0)
             y = xt[p] if (on_bl or two) and not rec_motor else xm[p]
             if on_rs and not rs_two:
                 y += q[p]
@@ -457,6 +509,152 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
             if want_u:
                 OUT_U[p, k] = 0.0
         if last:
+            continue
+        sr = (xr[k + 1] - xr[k]) / Ts  # first-order hold of the command, mm/s
+        if exact:
+            # The exact step: one sub-step of the single mass on the continuous controller (eq. 3.3, 3.2).
+            # The linear part of eq. 3.3 advances exactly (:func:`ident.discretisation.foh_blocks`):
+            # the command position ``xa`` and drive ``ua`` linear over the sub-step (slopes ``sr``,
+            # ``suc``), friction and every effect's input held at their values at the sub-step's
+            # start — the saturation clip, the in-loop delay and the cyclic force as the applied u
+            # less the linear law's, the ψ-share as ``−a2·ψ·(x_w − x)``, the anti-windup freeze as an
+            # input on ż cancelling ``x_r − x`` (exact for the linear part, first order in the
+            # nonlinearity: an exponential-Euler step).  Friction follows Karnopp: moving, the level
+            # of the current direction (the Stribeck curve at the current speed); when ẋ reaches zero
+            # inside the sub-step the instant is interpolated and the axis reverses if the drive beats
+            # the breakaway level of the other side, else it sticks; stuck, it breaks away at the
+            # instant, interpolated inside the sub-step, the drive leaves the breakaway band.  Both
+            # instants are interpolated so x̂ is continuous in the parameters.
+            # A set's sub-steps run one after the other with its state in registers (the lockstep
+            # over sets is per sample here): the chain of one sub-step is short.
+            for p in range(P):
+                uck = b0[p] * ar[k] + b1[p] * vr[k] + b2[p] * xr[k] + load[k]
+                suc = (b0[p] * ar[k + 1] + b1[p] * vr[k + 1] + b2[p] * xr[k + 1] + load[k + 1] - uck) / Ts
+                z = ei[p]
+                x = xm[p]
+                vv = v[p]
+                md = dir_[p]
+                for j in range(nsub):
+                    xa = xr[k] + sr * (j * h)
+                    ua = uck + suc * (j * h)
+                    ulin = ua + a3[p] * z - a2[p] * x - a1[p] * vv
+                    g = 0.0 * ua  # the effects' acceleration, held
+                    wz = 0.0 * ua  # the anti-windup input on ż, held
+                    wx = True
+                    if extra[p]:
+                        u = ulin - a2[p] * psi[p] * (xw[p] - x)
+                        if on_sa:
+                            ig = xa - x if psi[p].real == 0.0 else a3[p] * (xa - x) - psi[p] * a2[p] * vv
+                            u, wind = _clipped(u, lim[p], ig, sa_windup)
+                            wx = wind
+                            if not wind:
+                                wz = x - xa
+                        if want_u and j == 0:
+                            OUT_U[p, k] = u
+                        if td_loop:
+                            u = _loop_delayed(buf, bi, p, u, dsteps[p], nbuf[p])
+                        if cy_force:
+                            u -= cs[p] * sin(tw[p] * x) + cc[p] * cos(tw[p] * x)
+                        g = u - ulin
+                    elif want_u and j == 0:
+                        OUT_U[p, k] = ulin
+                    up = d0[p] * rs[p]  # breakaway levels (Coulomb without Stribeck)
+                    dn = d1[p] * rs[p]
+                    frictional = up.real != 0.0 or dn.real != 0.0
+                    v_old = vv
+                    x_old = x
+                    stuck = False
+                    if md == 0 and frictional:
+                        F = ulin + g  # the drive at rest, without friction
+                        go_up = F.real > up.real
+                        go_dn = F.real < dn.real
+                        if go_up and go_dn:  # only if d1 > d0 (unphysical friction): the stronger side wins
+                            if (F - up).real >= (dn - F).real:
+                                go_dn = False
+                            else:
+                                go_up = False
+                        if go_up:
+                            md = 1
+                        elif go_dn:
+                            md = -1
+                        else:  # stuck: friction balances F, x and ẋ = 0 held, z integrates
+                            stuck = True
+                            z = z + h * (xa + 0.5 * sr * h) - h * x + h * wz
+                            vv = 0.0 * vv
+                            Fb = (ua + suc * h) - a2[p] * x + a3[p] * z + g
+                            if Fb.real > up.real or Fb.real < dn.real:
+                                fb = up if Fb.real > up.real else dn
+                                dF = Fb - F
+                                tc = div(fb - F, dF) if dF.real != 0.0 else 1.0 + 0.0 * dF
+                                if tc.real < 0.0:
+                                    tc = 0.0 * tc
+                                elif tc.real > 1.0:
+                                    tc = 1.0 + 0.0 * tc
+                                r = (1.0 - tc) * h
+                                acc = Fb - fb  # net acceleration, ramping up from 0 over r
+                                vv = 0.5 * acc * r
+                                x = x + acc * r * r / 6.0
+                                md = 1 if Fb.real > up.real else -1
+                    if not stuck:
+                        lvl = d0[p] if md == 1 else d1[p]
+                        if on_st:
+                            sq = div(vv, vs[p])
+                            lvl = lvl * (1.0 + (rs[p] - 1.0) * exp(-(sq * sq)))
+                        gin = ua + g - lvl
+                        xin = xa + wz
+                        zn = PH[p, 0, 0] * z + PH[p, 0, 1] * x + PH[p, 0, 2] * vv + GA[p, 0, 0] * xin + GA[p, 0, 1] * gin + GB[p, 0, 0] * sr + GB[p, 0, 1] * suc
+                        xn = PH[p, 1, 0] * z + PH[p, 1, 1] * x + PH[p, 1, 2] * vv + GA[p, 1, 0] * xin + GA[p, 1, 1] * gin + GB[p, 1, 0] * sr + GB[p, 1, 1] * suc
+                        vn = PH[p, 2, 0] * z + PH[p, 2, 1] * x + PH[p, 2, 2] * vv + GA[p, 2, 0] * xin + GA[p, 2, 1] * gin + GB[p, 2, 0] * sr + GB[p, 2, 1] * suc
+                        if md * vn.real <= 0.0 and frictional:
+                            # ẋ reached zero inside the sub-step: interpolate the instant, then reverse (if
+                            # the drive beats the other side's breakaway level) or stick.  Without friction
+                            # nothing sticks: the linear model exactly.
+                            dv = vv - vn
+                            tc = div(vv, dv) if dv.real != 0.0 else 1.0 + 0.0 * dv
+                            if tc.real < 0.0:
+                                tc = 0.0 * tc
+                            elif tc.real > 1.0:
+                                tc = 1.0 + 0.0 * tc
+                            r = (1.0 - tc) * h
+                            F = (ua + suc * h) + g - a2[p] * xn + a3[p] * zn
+                            if md == 1:
+                                rev = F.real < dn.real
+                                f_new = dn
+                            else:
+                                rev = F.real > up.real
+                                f_new = up
+                            if rev:
+                                df = f_new - lvl  # friction change over the remaining r seconds
+                                vn = vn - df * r
+                                xn = xn - 0.5 * df * r * r
+                                if md * vn.real < 0.0:
+                                    md = -md
+                                else:
+                                    vn = 0.0 * vn
+                                    md = 0
+                            else:
+                                xn = xn - 0.5 * vn * r  # undo the overshoot past the stop
+                                vn = 0.0 * vn
+                                md = 0
+                        z = zn
+                        x = xn
+                        vv = vn
+                    if wx:
+                        xw[p] += x - x_old
+                    if on_bl:
+                        if (x - xt[p]).real > half[p].real:
+                            xt[p] = x - half[p]
+                        elif (x - xt[p]).real < -half[p].real:
+                            xt[p] = x + half[p]
+                    if on_rs:
+                        acc = div(vv - v_old, h)
+                        qdd = -2.0 * zr[p] * wr[p] * qd[p] - wr[p] * wr[p] * q[p] - kr[p] * acc
+                        qd[p] += h * qdd
+                        q[p] += h * qd[p]
+                ei[p] = z
+                xm[p] = x
+                v[p] = vv
+                dir_[p] = md
             continue
         for j in range(nsub):
             f = j / nsub
@@ -507,24 +705,12 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     wind_x[p] = True
                     if on_sa:
                         ig = xrj - xfb if psi[p].real == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * v[p]
-                        if u.real > lim[p].real:
-                            u = lim[p]
-                            wind = sa_windup or ig.real <= 0.0
-                        elif u.real < -lim[p].real:
-                            u = -lim[p]
-                            wind = sa_windup or ig.real >= 0.0
+                        u, wind = _clipped(u, lim[p], ig, sa_windup)
                         wind_x[p] = wind
                 if want_u and j == 0:
                     OUT_U[p, k] = u
                 if td_loop:
-                    nb = nbuf[p]
-                    buf[p, bi[p]] = u
-                    ip = int(dsteps[p].real)
-                    fr = dsteps[p] - ip
-                    i0 = (bi[p] - ip) % nb
-                    i1 = (bi[p] - ip - 1) % nb
-                    u = (1.0 - fr) * buf[p, i0] + fr * buf[p, i1]
-                    bi[p] = (bi[p] + 1) % nb
+                    u = _loop_delayed(buf, bi, p, u, dsteps[p], nbuf[p])
                 if cy_force:
                     u -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                 if two:
@@ -735,10 +921,13 @@ def _runnable(TH: np.ndarray, E: np.ndarray) -> np.ndarray:
 
 
 def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, warm,
-          u_out: np.ndarray | None = None) -> np.ndarray:
+          u_out: np.ndarray | None = None, load: np.ndarray | None = None, start_rule: int = 0) -> np.ndarray:
     """:func:`_kernel_many` on P sets of parameters of number type ``dtype`` (float or complex);
     rows that are no model to simulate (:func:`_runnable`) are NaN.  ``u_out`` (N,), one set
-    only: filled with the u the set applied."""
+    only: filled with the u the set applied.  ``load`` (N,), mm/s²: an external acceleration
+    added to the command drive (:class:`ident.simulation.FreeRun`'s disturbance).
+    ``start_rule``: 0 a segment starts at rest (or warm), 1 as the identification's free run
+    does (:mod:`ident.simulation`: z = 0, ẋ = ẋ_r)."""
     x_r = np.ascontiguousarray(x_r, dtype=float)
     n = x_r.size
     TH = np.ascontiguousarray(thetas, dtype=dtype).reshape(-1, 8)
@@ -751,7 +940,8 @@ def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, w
                      np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(starts, dtype=np.bool_),
                      *_warm_arrays(warm, n), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]),
                      np.ascontiguousarray(flags, dtype=np.int64), np.ascontiguousarray(E[ok]), _padded_modes(modes),
-                     y, out_u)
+                     y, out_u, np.zeros(n) if load is None else np.ascontiguousarray(load, dtype=float),
+                     int(start_rule))
         if u_out is not None:
             u_out[:] = out_u[0]
     if ok.all():
