@@ -10,13 +10,14 @@ drive ``u = b0·ẍ_r + b1·ẋ_r + b2·x_r`` (mm/s²).  ``ẋ_r`` and ``ẍ_r``
 differences of eq. 3.9 (one-sided at segment ends), the same signals the regression of
 eq. 3.11 uses, so the simulated model is the identified one.
 
-**Integration**: exact discretisation of the linear part for inputs that are linear
-between samples (first-order hold of x_r and u) and friction held over a sub-step: the
-matrix exponential of the augmented matrix ``[[A, B, 0], [0, 0, I], [0, 0, 0]]·h``
-(computed in numba: scipy's ``expm`` goes through multi-threaded BLAS, which costs
-milliseconds on a loaded machine) gives ``s(t+h) = Φ·s + Γ0·w + Γ1·ẇ`` — exact for any pole location (no stiffness limit).
-Each sample period is split into ``substeps`` sub-steps so that friction switches within a
-period are resolved to Ts/substeps.
+**Integration**: the one simulator kernel of the identified model
+(:func:`ident.kernel._kernel_many`, with no effect and the continuous
+controller): exact discretisation of the linear part for inputs that are linear between
+samples (first-order hold of x_r and u) and friction held over a sub-step — the blocks of
+the matrix exponential of ``[[A, B, 0], [0, 0, I], [0, 0, 0]]·h``
+(:mod:`ident.discretisation`) give ``s(t+h) = Φ·s + Γ0·w + Γ1·ẇ``, exact for any pole
+location (no stiffness limit).  Each sample period is split into ``substeps`` sub-steps so
+that friction switches within a period are resolved to Ts/substeps.
 
 **Friction** (Karnopp stick rule, no chattering): while moving the friction is d0 (ẋ>0)
 or d1 (ẋ<0).  When ẋ crosses zero inside a sub-step the crossing instant is interpolated;
@@ -31,7 +32,8 @@ reduces to the linear model exactly.
 
 **Segments**: the state restarts at each segment start (no integration across a seam):
 z = 0 (consistent with the regression's e_i, see :mod:`ident.preprocessing`), x from
-``x0`` (the recorded actual position) or the command, ẋ = ẋ_r.
+``x0`` (the recorded actual position) or the command, ẋ = ẋ_r (the kernel's
+``start_rule`` 1; the diagnosis starts at rest with the integral at equilibrium).
 
 A 25 000-sample run takes a few ms after the first (numba-compiled, cached) call; see
 ``benchmarks/bench_model_simulation.py``.
@@ -42,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 
 from ident.discretisation import foh_blocks
+from ident.kernel import EFFECTS, N_EP, N_MODES, _many
 from ident.model import base_vector
 from ident.preprocessing import segment_slices
 
@@ -156,10 +159,8 @@ class FreeRun:
         """
         if self.n == 0:
             return np.empty(0)
-        # The one simulator kernel (imported here: the diagnosis package imports this module),
-        # with no effect, the continuous controller and the identification's start rule.
-        from ident.diagnosis.augmented import N_EP, N_MODES, EFFECTS, _many
-
+        # The one simulator kernel with no effect, the continuous controller and the
+        # identification's start rule.
         theta = np.array(_params(model), dtype=float)
         return _many(self.x_r, self.x_start, self.Ts, theta, np.zeros(N_EP), float,
                      np.zeros(len(EFFECTS), dtype=np.int64), np.zeros(N_MODES, dtype=np.int64), self.seg_starts,
