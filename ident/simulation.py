@@ -10,13 +10,14 @@ drive ``u = b0·ẍ_r + b1·ẋ_r + b2·x_r`` (mm/s²).  ``ẋ_r`` and ``ẍ_r``
 differences of eq. 3.9 (one-sided at segment ends), the same signals the regression of
 eq. 3.11 uses, so the simulated model is the identified one.
 
-**Integration**: exact discretisation of the linear part for inputs that are linear
-between samples (first-order hold of x_r and u) and friction held over a sub-step: the
-matrix exponential of the augmented matrix ``[[A, B, 0], [0, 0, I], [0, 0, 0]]·h``
-(computed in numba: scipy's ``expm`` goes through multi-threaded BLAS, which costs
-milliseconds on a loaded machine) gives ``s(t+h) = Φ·s + Γ0·w + Γ1·ẇ`` — exact for any pole location (no stiffness limit).
-Each sample period is split into ``substeps`` sub-steps so that friction switches within a
-period are resolved to Ts/substeps.
+**Integration**: the one simulator kernel of the identified model
+(:func:`ident.kernel._kernel_many`, with no effect and the continuous
+controller): exact discretisation of the linear part for inputs that are linear between
+samples (first-order hold of x_r and u) and friction held over a sub-step — the blocks of
+the matrix exponential of ``[[A, B, 0], [0, 0, I], [0, 0, 0]]·h``
+(:mod:`ident.discretisation`) give ``s(t+h) = Φ·s + Γ0·w + Γ1·ẇ``, exact for any pole
+location (no stiffness limit).  Each sample period is split into ``substeps`` sub-steps so
+that friction switches within a period are resolved to Ts/substeps.
 
 **Friction** (Karnopp stick rule, no chattering): while moving the friction is d0 (ẋ>0)
 or d1 (ẋ<0).  When ẋ crosses zero inside a sub-step the crossing instant is interpolated;
@@ -31,7 +32,8 @@ reduces to the linear model exactly.
 
 **Segments**: the state restarts at each segment start (no integration across a seam):
 z = 0 (consistent with the regression's e_i, see :mod:`ident.preprocessing`), x from
-``x0`` (the recorded actual position) or the command, ẋ = ẋ_r.
+``x0`` (the recorded actual position) or the command, ẋ = ẋ_r (the kernel's
+``start_rule`` 1; the diagnosis starts at rest with the integral at equilibrium).
 
 A 25 000-sample run takes a few ms after the first (numba-compiled, cached) call; see
 ``benchmarks/bench_model_simulation.py``.
@@ -40,8 +42,9 @@ A 25 000-sample run takes a few ms after the first (numba-compiled, cached) call
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ident.discretisation import foh_blocks
+from ident.kernel import EFFECTS, N_EP, N_MODES, _many
 from ident.model import base_vector
 from ident.preprocessing import segment_slices
 
@@ -81,49 +84,6 @@ def command_drive(model, x_r: np.ndarray, Ts: float, segment: np.ndarray | None 
     return b0 * fr.xr_ddot + b1 * fr.xr_dot + b2 * fr.x_r
 
 
-@njit(cache=True)
-def _matmul(A, B):  # pragma: no cover - numba
-    """Small dense product with plain loops (BLAS threading costs ms on tiny matrices)."""
-    n, k = A.shape
-    m = B.shape[1]
-    C = np.zeros((n, m))
-    for i in range(n):
-        for j in range(m):
-            acc = 0.0
-            for r in range(k):
-                acc += A[i, r] * B[r, j]
-            C[i, j] = acc
-    return C
-
-
-@njit(cache=True)
-def _expm(M):  # pragma: no cover - numba
-    """exp(M) by scaling and squaring with a degree-18 Taylor series (‖M/2^s‖₁ ≤ 0.5).
-
-    Truncation error ≤ 0.5^19/19! ≈ 1.6e-23 relative before squaring: exact to rounding.
-    """
-    n = M.shape[0]
-    norm = 0.0
-    for j in range(n):
-        c = 0.0
-        for i in range(n):
-            c += abs(M[i, j])
-        norm = max(norm, c)
-    s = 0
-    while norm > 0.5:
-        norm *= 0.5
-        s += 1
-    A = M / (2.0**s)
-    E = np.eye(n)
-    term = np.eye(n)
-    for k in range(1, 19):
-        term = _matmul(term, A) / k
-        E += term
-    for _ in range(s):
-        E = _matmul(E, E)
-    return E
-
-
 def discretise(model, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact first-order-hold discretisation of eq. 3.3's linear part over a step ``h`` (s).
 
@@ -132,113 +92,9 @@ def discretise(model, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     ``s(t+h) = Φ s(t) + Γ0 w + Γ1 ẇ``: the blocks of ``exp([[A, B, 0], [0, 0, I], [0, 0, 0]]·h)``.
     """
     a1, a2, a3, *_ = _params(model)
-    A = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [a3, -a2, -a1]])
-    B = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, -1.0]])
-    M = np.zeros((9, 9))
-    M[:3, :3] = A
-    M[:3, 3:6] = B
-    M[3:6, 6:9] = np.eye(3)
-    E = _expm(M * h)
-    return E[:3, :3].copy(), E[:3, 3:6].copy(), E[:3, 6:9].copy()
-
-
-@njit(cache=True)
-def _free_run(xr, u, starts, stops, x_init, v_init, Phi, G0, G1, a2, a3, d0, d1, m, Ts):  # pragma: no cover - numba
-    n = xr.shape[0]
-    out = np.empty(n)
-    h = Ts / m
-    for sidx in range(starts.shape[0]):
-        a = starts[sidx]
-        b = stops[sidx]
-        z = 0.0
-        x = x_init[sidx]
-        v = v_init[sidx]
-        mode = 0
-        if v > 0.0:
-            mode = 1
-        elif v < 0.0:
-            mode = -1
-        out[a] = x
-        for k in range(a, b - 1):
-            xr_k = xr[k]
-            u_k = u[k]
-            sr = (xr[k + 1] - xr_k) / Ts  # FOH slopes, mm/s and mm/s³
-            su = (u[k + 1] - u_k) / Ts
-            for j in range(m):
-                xa = xr_k + sr * (j * h)
-                ua = u_k + su * (j * h)
-                if mode == 0:
-                    F = ua - a2 * x + a3 * z  # acceleration at ẋ = 0 without friction
-                    up = F > d0
-                    dn = F < d1
-                    if up and dn:  # only if d1 > d0 (unphysical friction): stronger side wins
-                        if F - d0 >= d1 - F:
-                            dn = False
-                        else:
-                            up = False
-                    if up:
-                        mode = 1
-                    elif dn:
-                        mode = -1
-                    else:  # stuck: friction balances F, x and ẋ = 0 held, z integrates
-                        z += h * (xa + 0.5 * sr * h) - h * x
-                        v = 0.0
-                        # Break away inside the sub-step if F leaves [d1, d0] before its end:
-                        # interpolate the instant, so x̂ depends continuously on the parameters.
-                        Fb = (ua + su * h) - a2 * x + a3 * z
-                        if Fb > d0 or Fb < d1:
-                            fb = d0 if Fb > d0 else d1
-                            dF = Fb - F
-                            tau = (fb - F) / dF if dF != 0.0 else 1.0
-                            if tau < 0.0:
-                                tau = 0.0
-                            elif tau > 1.0:
-                                tau = 1.0
-                            r = (1.0 - tau) * h
-                            acc = Fb - fb  # net acceleration, ramping up from 0 over r
-                            v = 0.5 * acc * r
-                            x += acc * r * r / 6.0
-                            mode = 1 if Fb > d0 else -1
-                        continue
-                f = d0 if mode == 1 else d1
-                zn = Phi[0, 0] * z + Phi[0, 1] * x + Phi[0, 2] * v + G0[0, 0] * xa + G0[0, 1] * ua + G0[0, 2] * f + G1[0, 0] * sr + G1[0, 1] * su
-                xn = Phi[1, 0] * z + Phi[1, 1] * x + Phi[1, 2] * v + G0[1, 0] * xa + G0[1, 1] * ua + G0[1, 2] * f + G1[1, 0] * sr + G1[1, 1] * su
-                vn = Phi[2, 0] * z + Phi[2, 1] * x + Phi[2, 2] * v + G0[2, 0] * xa + G0[2, 1] * ua + G0[2, 2] * f + G1[2, 0] * sr + G1[2, 1] * su
-                if mode * vn <= 0.0:
-                    # ẋ reached zero inside the sub-step: interpolate the instant, then
-                    # reverse (if the drive beats the other friction) or stick.
-                    dv = v - vn
-                    tau = v / dv if dv != 0.0 else 1.0
-                    if tau < 0.0:
-                        tau = 0.0
-                    elif tau > 1.0:
-                        tau = 1.0
-                    r = (1.0 - tau) * h
-                    F = (ua + su * h) - a2 * xn + a3 * zn
-                    if mode == 1:
-                        rev = F < d1
-                        f_new = d1
-                    else:
-                        rev = F > d0
-                        f_new = d0
-                    if rev:
-                        df = f_new - f  # friction change over the remaining r seconds
-                        vn -= df * r
-                        xn -= 0.5 * df * r * r
-                        if mode * vn < 0.0:
-                            mode = -mode
-                        else:
-                            vn = 0.0
-                            mode = 0
-                    else:
-                        xn -= 0.5 * vn * r  # undo the overshoot past the stop
-                        vn = 0.0
-                        mode = 0
-                z = zn
-                x = xn
-                v = vn
-            out[k + 1] = x
-    return out
+    Phi, G0, G1 = foh_blocks(float(a1), float(a2), float(a3), float(h))
+    # f enters as −u does (ẍ = … + u − f)
+    return Phi, np.column_stack([G0, -G0[:, 1]]), np.column_stack([G1, -G1[:, 1]])
 
 
 class FreeRun:
@@ -288,6 +144,10 @@ class FreeRun:
         self.x_r, self.Ts, self.n = x_r, float(Ts), n
         self.starts, self.stops, self.x_init = starts, stops, x_init
         self.v_init = xr_dot[starts].copy()
+        self.seg_starts = np.zeros(n, dtype=np.bool_)
+        self.seg_starts[starts] = True
+        self.x_start = np.zeros(n)
+        self.x_start[starts] = x_init
         self.xr_dot, self.xr_ddot = xr_dot, xr_ddot
         self.substeps = max(int(substeps), 1)
 
@@ -299,14 +159,12 @@ class FreeRun:
         """
         if self.n == 0:
             return np.empty(0)
-        a1, a2, a3, b0, b1, b2, d0, d1 = _params(model)
-        u = b0 * self.xr_ddot + b1 * self.xr_dot + b2 * self.x_r
-        if disturbance is not None:
-            u = u + np.asarray(disturbance, dtype=float)
-        m = self.substeps
-        Phi, G0, G1 = discretise(model, self.Ts / m)
-        return _free_run(self.x_r, u, self.starts, self.stops, self.x_init, self.v_init,
-                         Phi, G0, G1, a2, a3, d0, d1, m, self.Ts)
+        # The one simulator kernel with no effect, the continuous controller and the
+        # identification's start rule.
+        theta = np.array(_params(model), dtype=float)
+        return _many(self.x_r, self.x_start, self.Ts, theta, np.zeros(N_EP), float,
+                     np.zeros(len(EFFECTS), dtype=np.int64), np.zeros(N_MODES, dtype=np.int64), self.seg_starts,
+                     (self.xr_dot, self.xr_ddot), self.substeps, None, load=disturbance, start_rule=1)[0]
 
 
 def simulate(

@@ -305,8 +305,9 @@ def test_the_sub_steps_of_a_two_mass_gap_are_the_same_for_fits_and_scores():
 
 def test_the_contact_sub_steps_add_no_error_beyond_the_base_models_own(x_r):
     """The contact is integrated for stability, not phase accuracy: against a 32-sub-step
-    reference, the gap model at its own sub-steps is off by no more than the base model
-    without the gap is at the same sub-steps (the discretisation every candidate shares)."""
+    reference, the gap model at its own sub-steps is off by no more than the same two-mass
+    drive without the gap is at the same sub-steps (the discretisation the two-mass variants
+    share; the single mass is stepped exactly, so its error is no yardstick for them)."""
     from ident.diagnosis.spec import sim_substeps
 
     def run(spec, nsub):
@@ -324,7 +325,8 @@ def test_the_contact_sub_steps_add_no_error_beyond_the_base_models_own(x_r):
         n = sim_substeps(s, Ts)
         assert n > sim_substeps(base, Ts) == 1
         gap_err = np.sqrt(np.mean((run(s, n) - run(s, 32)) ** 2))
-        base_err = np.sqrt(np.mean((run(base, n) - run(base, 32)) ** 2))
+        no_gap = base.with_effect("backlash", {"gap_mm": 0.0, "motor_fraction": 0.5}, mode)
+        base_err = np.sqrt(np.mean((run(no_gap, n) - run(no_gap, 32)) ** 2))
         assert np.isfinite(gap_err) and gap_err <= 1.5 * base_err + 1e-5  # 10 nm: the reading floor
 
 

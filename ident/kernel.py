@@ -1,0 +1,687 @@
+"""The one simulator kernel of the identified model: eq. 3.3 and every effect of SPEC §7.
+
+:func:`_kernel_many` is the free run behind :mod:`ident.simulation` (the identified model,
+no effect: the output-error refinement, predictions, the virtual machine) and
+:mod:`ident.diagnosis.augmented` (the diagnosis's models, their lockstep Jacobian columns and
+complex-step sensitivities); the model, its effects, variants and integration are described
+there.  It lives outside the diagnosis package so that simulating the identified model does
+not import the diagnosis.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from core.effects import EFFECT_NAMES
+from ident.complex_step import cos, div, exp, sin
+from ident.discretisation import foh_blocks
+
+__all__ = ["EFFECTS", "EP_INDEX", "N_EP", "MODE_SLOTS", "N_MODES", "CONTACT_HZ", "CONTACT_DAMPING"]
+
+#: The effects of SPEC §7 in a fixed order; the flag vector follows it (the axis model's
+#: vocabulary, one list for the model and its simulator).
+EFFECTS: tuple[str, ...] = EFFECT_NAMES
+#: Index of each effect parameter in the effect-parameter vector ``ep``.
+EP_INDEX: dict[str, int] = {
+    "gap_mm": 0,
+    "static_to_coulomb_ratio": 1,
+    "stribeck_velocity_mm_s": 2,
+    "freq_hz": 3,
+    "damping": 4,
+    "gain": 5,
+    "delay_s": 6,
+    "period_mm": 7,
+    "amplitude_sin": 8,
+    "amplitude_cos": 9,
+    "limit": 10,
+    "motor_fraction": 11,
+    "position_motor_share": 12,
+    "limit_slope": 13,
+}
+N_EP = 14
+#: Variant slots of the ``modes`` vector: backlash, time_delay, cyclic_error, resonance,
+#: controller (0 continuous, 1 sampled, 2 sampled with causal feed-forward differences),
+#: saturation (0 anti-windup, 1 none).
+MODE_SLOTS: dict[str, int] = {"backlash": 0, "time_delay": 1, "cyclic_error": 2, "resonance": 3,
+                              "controller": 4, "saturation": 5}
+N_MODES = 6
+#: Frequency and damping ratio of the motor–table contact of a backlash gap in the two-mass
+#: variants, Hz and –.
+CONTACT_HZ = 400.0
+CONTACT_DAMPING = 0.5
+
+# The kernel's slots by name (numba reads module-level ints as compile-time constants).
+_FL_BACKLASH, _FL_STRIBECK, _FL_RESONANCE, _FL_DELAY, _FL_CYCLIC, _FL_SATURATION = (
+    EFFECTS.index(e) for e in ("backlash", "stribeck", "resonance", "time_delay", "cyclic_error", "saturation"))
+_MD_BACKLASH, _MD_DELAY, _MD_CYCLIC, _MD_RESONANCE, _MD_CONTROLLER, _MD_SATURATION = (
+    MODE_SLOTS[k] for k in ("backlash", "time_delay", "cyclic_error", "resonance", "controller", "saturation"))
+_GAP, _RATIO, _VS, _FREQ, _DAMPING, _GAIN, _DELAY, _PERIOD, _SIN, _COS, _LIMIT, _MOTOR, _PSI, _LSLOPE = (
+    EP_INDEX[k] for k in ("gap_mm", "static_to_coulomb_ratio", "stribeck_velocity_mm_s", "freq_hz", "damping", "gain",
+                          "delay_s", "period_mm", "amplitude_sin", "amplitude_cos", "limit", "motor_fraction",
+                          "position_motor_share", "limit_slope"))
+
+
+@njit(cache=True, nogil=True)
+def _friction_step(v: float, F: float, h: float, m: float, d0: float, d1: float, rs: float, on_st: bool,
+                   vs: float) -> float:
+    """Velocity after one sub-step of a mass share ``m`` under force ``F`` and friction (eq. 3.2).
+
+    Coulomb levels d0 (moving +) and d1 (moving −, negative), Stribeck curve when ``on_st``,
+    breakaway at ``rs``·d from rest (Karnopp stick phase).  When the velocity reaches zero
+    inside the sub-step, the rest of the sub-step starts from rest — stick, or break away the
+    other way: stopping for the whole sub-step would delay every reversal by up to one
+    sub-step (0.5 ms at 2 per sample), which a fitted dead time would take up.
+    """
+    rest = h
+    if v.real != 0.0:
+        d = d0 if v.real > 0.0 else d1
+        q = div(v, vs)
+        lvl = d * (1.0 + (rs - 1.0) * exp(-(q * q))) if on_st else d
+        vn = v + div(h * (F - lvl), m)
+        if vn.real * v.real > 0.0:
+            return vn
+        rest = h * (1.0 - div(v, v - vn))
+    if F.real > (d0 * rs).real:
+        return div(rest * (F - d0 * rs), m)
+    if F.real < (d1 * rs).real:
+        return div(rest * (F - d1 * rs), m)
+    return 0.0
+
+
+@njit(cache=True, nogil=True)
+def _delay_output(out, starts, tau, Ts):
+    """``out`` (recorded positions) delayed by ``tau`` s in place, fractionally, inside segments."""
+    n = out.size
+    sh = tau / Ts
+    ip = int(sh.real)
+    fr = sh - ip
+    res = out.copy()
+    s0 = 0
+    for k in range(n):
+        if starts[k]:
+            s0 = k
+        i0 = k - ip
+        i1 = k - ip - 1
+        if i0 < s0:
+            i0 = s0
+        if i1 < s0:
+            i1 = s0
+        res[k] = (1.0 - fr) * out[i0] + fr * out[i1]
+    for k in range(n):
+        out[k] = res[k]
+
+
+@njit(cache=True, nogil=True)
+def _clipped(u, lim, slope, v, ig, windup):
+    """``u`` clipped to ``±lim − slope·v`` (saturation) and whether the integral runs on: always
+    with ``windup``, else only while its error ``ig`` would not wind the clip up (conditional
+    integration).  The drive clips its own output ``u + slope·v``, which carries the plant's
+    viscous share of the speed term eq. 3.3 folds into a1: the limit of u falls with speed in
+    the direction it pushes."""
+    hi = lim - slope * v
+    lo = -lim - slope * v
+    if u.real > hi.real:
+        return hi, windup or ig.real <= 0.0
+    if u.real < lo.real:
+        return lo, windup or ig.real >= 0.0
+    return u, True
+
+
+@njit(cache=True, nogil=True)
+def _loop_delayed(buf, bi, p, u, dsteps, nb):
+    """``u`` into set ``p``'s ring buffer of sub-step values and, out of it, the u of ``dsteps``
+    sub-steps ago (linear between sub-steps): the dead time inside the loop."""
+    buf[p, bi[p]] = u
+    ip = int(dsteps.real)
+    fr = dsteps - ip
+    i0 = (bi[p] - ip) % nb
+    i1 = (bi[p] - ip - 1) % nb
+    bi[p] = (bi[p] + 1) % nb
+    return (1.0 - fr) * buf[p, i0] + fr * buf[p, i1]
+
+
+@njit(cache=True, nogil=True)
+def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, modes, OUT, OUT_U, load,
+                 start_rule):
+    """The free run of eq. 3.3 and the effects of :data:`EFFECTS` for P parameter sets in lockstep.
+
+    Rows of ``TH`` (P, 8) and ``EP`` (P, 13) are the sets, rows of ``OUT`` and ``OUT_U`` (P, N)
+    their recorded positions and the u applied at each sample (``OUT_U`` of no columns: not
+    wanted); flags, variants and sub-steps
+    are common (a Jacobian's columns).  Generic in the number type of ``TH``/``EP`` (and of
+    ``OUT``, ``OUT_U``): float64, or complex128 for :func:`sensitivities` — every comparison
+    reads ``.real``, so both take the same branches.  Each set's arithmetic is the same,
+    in the same order, whatever the other sets, so a row is bit for bit that set's free
+    run alone (P = 1, :func:`simulate_augmented`).  Why several at once: one free run is a
+    chain of dependent operations (every sub-step waits for the last), so the processor
+    idles on latencies; the sets' chains are independent and interleave (about twice the
+    simulations per second for 6–12 sets on the Euler step).  ``load`` (N,), mm/s²: an
+    external acceleration linear between samples (exact step only: the identification's
+    disturbance input); ``start_rule`` 1: segments start as :mod:`ident.simulation` starts
+    them (integral at zero, ẋ = ẋ_r) instead of at rest.
+    """
+    P = TH.shape[0]
+    n = xr.size
+    want_u = OUT_U.shape[1] == n
+    h = Ts / nsub
+    on_bl = flags[_FL_BACKLASH] != 0
+    on_st = flags[_FL_STRIBECK] != 0
+    on_rs = flags[_FL_RESONANCE] != 0
+    on_td = flags[_FL_DELAY] != 0
+    on_cy = flags[_FL_CYCLIC] != 0
+    on_sa = flags[_FL_SATURATION] != 0
+    sa_windup = on_sa and modes[_MD_SATURATION] == 1
+    bl_loop = on_bl and modes[_MD_BACKLASH] >= 1
+    rs_two = on_rs and modes[_MD_RESONANCE] >= 1
+    fb_motor = (rs_two and modes[_MD_RESONANCE] >= 2) or (bl_loop and modes[_MD_BACKLASH] == 2)
+    rec_motor = rs_two and modes[_MD_RESONANCE] == 3
+    two = bl_loop or rs_two
+    td_loop = on_td and modes[_MD_DELAY] == 1
+    cy_force = on_cy and modes[_MD_CYCLIC] == 1
+    sampled = modes[_MD_CONTROLLER] != 0
+    causal = modes[_MD_CONTROLLER] == 2
+    a1 = TH[:, 0].copy()
+    a2 = TH[:, 1].copy()
+    a3 = TH[:, 2].copy()
+    b0 = TH[:, 3].copy()
+    b1 = TH[:, 4].copy()
+    b2 = TH[:, 5].copy()
+    d0 = TH[:, 6].copy()
+    d1 = TH[:, 7].copy()
+    half = np.empty_like(a1)
+    rs = np.empty_like(a1)
+    vs = np.empty_like(a1)
+    wr = np.empty_like(a1)
+    zr = np.empty_like(a1)
+    kr = np.empty_like(a1)
+    tau = np.empty_like(a1)
+    tw = np.empty_like(a1)
+    cs = np.empty_like(a1)
+    cc = np.empty_like(a1)
+    lim = np.empty_like(a1)
+    lsl = np.empty_like(a1)
+    mu = np.empty_like(a1)
+    psi = np.empty_like(a1)
+    kc = np.empty_like(a1)
+    cdmp = np.empty_like(a1)
+    half_c = np.empty_like(a1)
+    dsteps = np.empty_like(a1)
+    nbuf = np.empty(P, dtype=np.int64)
+    for p in range(P):
+        ep = EP[p]
+        half[p] = 0.5 * ep[_GAP]
+        rs[p] = ep[_RATIO] if on_st else 1.0
+        vs[p] = ep[_VS] if ep[_VS].real > 1e-9 else 1e-9
+        wr[p] = 2.0 * math.pi * ep[_FREQ]
+        zr[p] = ep[_DAMPING]
+        kr[p] = ep[_GAIN]
+        tau[p] = ep[_DELAY] if on_td else 0.0
+        per = ep[_PERIOD] if ep[_PERIOD].real > 1e-9 else 1e-9
+        tw[p] = 2.0 * math.pi / per
+        cs[p] = ep[_SIN]
+        cc[p] = ep[_COS]
+        lim[p] = ep[_LIMIT]
+        lsl[p] = ep[_LSLOPE]
+        m_ = ep[_MOTOR] if ep[_MOTOR].real > 0.0 else 1.0
+        psi[p] = ep[_PSI]
+        if two:
+            if m_.real <= 0.0 or m_.real >= 1.0:
+                m_ = 0.8
+            wc = wr[p] if rs_two else 2.0 * math.pi * CONTACT_HZ
+            zc = zr[p] if rs_two else CONTACT_DAMPING
+            mred = m_ * (1.0 - m_)
+            kc[p] = wc * wc * mred
+            cdmp[p] = 2.0 * zc * wc * mred
+            half_c[p] = half[p] if bl_loop else 0.0
+        else:
+            kc[p] = 0.0
+            cdmp[p] = 0.0
+            half_c[p] = 0.0
+        mu[p] = m_
+        dsteps[p] = tau[p] / h if td_loop else 0.0
+        nbuf[p] = int(dsteps[p].real) + 3
+    buf = np.zeros((P, int(np.max(nbuf))), dtype=TH.dtype)
+    bi = np.zeros(P, dtype=np.int64)
+    xm = np.zeros_like(a1)
+    v = np.zeros_like(a1)
+    xt = np.zeros_like(a1)
+    vt = np.zeros_like(a1)
+    q = np.zeros_like(a1)
+    qd = np.zeros_like(a1)
+    ei = np.zeros_like(a1)
+    vb = np.zeros_like(a1)
+    vb_prev = np.zeros_like(a1)
+    xm_prev = np.zeros_like(a1)
+    xw = np.zeros_like(a1)
+    wind_x = np.ones(P, dtype=np.bool_)
+    wind_h = np.ones(P, dtype=np.bool_)
+    first = np.ones(P, dtype=np.bool_)
+    u_h = np.zeros_like(a1)
+    u_last = np.zeros_like(a1)
+    # The exact step (single mass, continuous controller): per set the first-order-hold blocks
+    # of eq. 3.3's linear part over a sub-step, the Karnopp state (1 moving +, −1 moving −,
+    # 0 stuck), the command drive at the sample and its slope, and whether any effect adds a
+    # held input.
+    exact = not two and not sampled
+    PH = np.zeros((P, 3, 3), dtype=TH.dtype)
+    GA = np.zeros((P, 3, 2), dtype=TH.dtype)
+    GB = np.zeros((P, 3, 2), dtype=TH.dtype)
+    dir_ = np.zeros(P, dtype=np.int64)
+    extra = np.zeros(P, dtype=np.bool_)
+    if exact:
+        for p in range(P):
+            Phi_, G0_, G1_ = foh_blocks(a1[p], a2[p], a3[p], h)
+            PH[p] = Phi_
+            GA[p] = G0_
+            GB[p] = G1_
+            extra[p] = on_sa or td_loop or cy_force or psi[p].real != 0.0
+    for k in range(n):
+        last = k == n - 1 or starts[k + 1]
+        for p in range(P):
+            if starts[k]:
+                first[p] = True
+                xm[p] = x0[k]
+                xw[p] = xm[p]
+                xt[p] = xm[p]
+                v[p] = 0.0
+                vt[p] = 0.0
+                q[p] = 0.0
+                qd[p] = 0.0
+                ei[p] = (a2[p] * xm[p] - b2[p] * xr[k]) / a3[p] if a3[p].real != 0.0 else 0.0
+                dir_[p] = 0
+                vb[p] = 0.0
+                vb_prev[p] = 0.0
+                u0 = 0.0
+                if warm[k]:
+                    vk = vw[k]
+                    ak = aw[k]
+                    if on_td and not td_loop:
+                        xm[p] += tau[p] * (vk + 0.5 * tau[p] * ak)
+                        vk += tau[p] * ak
+                        xt[p] = xm[p]
+                    if on_cy and not cy_force:
+                        xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
+                        xt[p] = xm[p]
+                    # Euler's velocities live at half sub-steps; the exact step's at the sub-step.
+                    v[p] = vk if exact else vk - 0.5 * h * ak
+                    vt[p] = v[p]
+                    if exact and vk.real != 0.0:
+                        dir_[p] = 1 if vk.real > 0.0 else -1
+                    lvl = 0.0
+                    if vk.real != 0.0:
+                        lvl = d0[p] if vk.real > 0.0 else d1[p]
+                        if on_st:
+                            sv_ = div(vk, vs[p])
+                            lvl *= 1.0 + (rs[p] - 1.0) * exp(-(sv_ * sv_))
+                    u0 = ak + lvl
+                    if cy_force:
+                        u0 += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
+                    if two:
+                        fc = (1.0 - mu[p]) * ak + lvl
+                        if fc.real != 0.0 and rec_motor:
+                            xt[p] = xm[p] - div(fc, kc[p])  # the recorded state is the motor's
+                        elif fc.real != 0.0:
+                            xm[p] = xt[p] + div(fc, kc[p]) + (half_c[p] if fc.real > 0.0 else -half_c[p])
+                    elif on_bl:
+                        sv = vr[k] if vr[k] != 0.0 else vk
+                        if sv.real != 0.0:
+                            xm[p] = xt[p] + (half[p] if sv.real > 0.0 else -half[p])
+                    xw[p] = xm[p]
+                    xfb = xt[p] if (two and not fb_motor) else xm[p]
+                    vf = v[p]
+                    e_int = 0.0
+                    ff = b0[p] * ar[k] + b1[p] * vr[k]
+                    if sampled:
+                        vf = vk - 0.5 * Ts * ak
+                        xm_prev[p] = xm[p] - vf * Ts
+                        e_int = Ts * (xr[k] - xfb)
+                        vb[p] = vr[k] - 1.5 * ar[k] * Ts
+                        if causal:
+                            ff = b0[p] * ar[k] + b1[p] * (vr[k] - 0.5 * ar[k] * Ts)
+                        u_last[p] = u0
+                        u_h[p] = u0
+                        first[p] = False
+                    if a3[p].real != 0.0:
+                        ei[p] = (u0 - ff - b2[p] * xr[k] + a2[p] * ((1.0 - psi[p]) * xfb + psi[p] * xw[p])
+                                 + a1[p] * vf) / a3[p] - e_int
+                for i in range(nbuf[p]):
+                    buf[p, i] = u0
+                bi[p] = 0
+                if start_rule == 1:  # the identification's start (ident.simulation): z = 0, ẋ = ẋ_r
+                    ei[p] = 0.0
+                    v[p] = vr[k]
+                    dir_[p] = 1 if vr[k] > 0.0 else (-1 if vr[k] < 0.0 else 0)
+            y = xt[p] if (on_bl or two) and not rec_motor else xm[p]
+            if on_rs and not rs_two:
+                y += q[p]
+            if on_cy and not cy_force:
+                y += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
+            OUT[p, k] = y
+            if want_u:
+                OUT_U[p, k] = 0.0
+        if last:
+            continue
+        sr = (xr[k + 1] - xr[k]) / Ts  # first-order hold of the command, mm/s
+        if exact:
+            # The exact step: one sub-step of the single mass on the continuous controller (eq. 3.3, 3.2).
+            # The linear part of eq. 3.3 advances exactly (:func:`ident.discretisation.foh_blocks`):
+            # the command position ``xa`` and drive ``ua`` linear over the sub-step (slopes ``sr``,
+            # ``suc``), friction and every effect's input held at their values at the sub-step's
+            # start — the saturation clip, the in-loop delay and the cyclic force as the applied u
+            # less the linear law's, the ψ-share as ``−a2·ψ·(x_w − x)``, the anti-windup freeze as an
+            # input on ż cancelling ``x_r − x`` (exact for the linear part, first order in the
+            # nonlinearity: an exponential-Euler step).  Friction follows Karnopp: moving, the level
+            # of the current direction (the Stribeck curve at the current speed); when ẋ reaches zero
+            # inside the sub-step the instant is interpolated and the axis reverses if the drive beats
+            # the breakaway level of the other side, else it sticks; stuck, it breaks away at the
+            # instant, interpolated inside the sub-step, the drive leaves the breakaway band.  Both
+            # instants are interpolated so x̂ is continuous in the parameters.
+            # A set's sub-steps run one after the other with its state in registers (the lockstep
+            # over sets is per sample here): the chain of one sub-step is short.
+            for p in range(P):
+                uck = b0[p] * ar[k] + b1[p] * vr[k] + b2[p] * xr[k] + load[k]
+                suc = (b0[p] * ar[k + 1] + b1[p] * vr[k + 1] + b2[p] * xr[k + 1] + load[k + 1] - uck) / Ts
+                z = ei[p]
+                x = xm[p]
+                vv = v[p]
+                md = dir_[p]
+                for j in range(nsub):
+                    xa = xr[k] + sr * (j * h)
+                    ua = uck + suc * (j * h)
+                    ulin = ua + a3[p] * z - a2[p] * x - a1[p] * vv
+                    g = 0.0 * ua  # the effects' acceleration, held
+                    wz = 0.0 * ua  # the anti-windup input on ż, held
+                    wx = True
+                    held = False  # the drive's output clipped: the loop does not act inside the sub-step
+                    if extra[p]:
+                        u = ulin - a2[p] * psi[p] * (xw[p] - x)
+                        if on_sa:
+                            ig = xa - x if psi[p].real == 0.0 else a3[p] * (xa - x) - psi[p] * a2[p] * vv
+                            u_free = u
+                            u, wind = _clipped(u, lim[p], lsl[p], vv, ig, sa_windup)
+                            held = u.real != u_free.real
+                            wx = wind
+                            if not wind:
+                                wz = x - xa
+                        if want_u and j == 0:
+                            OUT_U[p, k] = u
+                        if td_loop:
+                            u = _loop_delayed(buf, bi, p, u, dsteps[p], nbuf[p])
+                        if cy_force:
+                            u -= cs[p] * sin(tw[p] * x) + cc[p] * cos(tw[p] * x)
+                        g = u - ulin
+                    elif want_u and j == 0:
+                        OUT_U[p, k] = ulin
+                    up = d0[p] * rs[p]  # breakaway levels (Coulomb without Stribeck)
+                    dn = d1[p] * rs[p]
+                    frictional = up.real != 0.0 or dn.real != 0.0
+                    v_old = vv
+                    x_old = x
+                    stuck = False
+                    if held:
+                        # Clipped, the drive applies the limit whatever the loop's state: the
+                        # held-input correction of the exponential step would let the loop's
+                        # law (an integral wound up by a3·h·(x_r − x) per sub-step, as large
+                        # as the limit itself) act inside the sub-step.  The mass under the
+                        # held force, exact for a force held over the sub-step (friction and
+                        # its Karnopp stop as _friction_step), the integral by the trapezoid.
+                        vn = _friction_step(vv, u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
+                        xn = x + 0.5 * h * (vv + vn)
+                        if wx:
+                            z = z + h * (xa + 0.5 * sr * h) - 0.5 * h * (x + xn)
+                        x = xn
+                        vv = vn
+                        md = 1 if vn.real > 0.0 else (-1 if vn.real < 0.0 else 0)
+                    elif md == 0 and frictional:
+                        F = ulin + g  # the drive at rest, without friction
+                        go_up = F.real > up.real
+                        go_dn = F.real < dn.real
+                        if go_up and go_dn:  # only if d1 > d0 (unphysical friction): the stronger side wins
+                            if (F - up).real >= (dn - F).real:
+                                go_dn = False
+                            else:
+                                go_up = False
+                        if go_up:
+                            md = 1
+                        elif go_dn:
+                            md = -1
+                        else:  # stuck: friction balances F, x and ẋ = 0 held, z integrates
+                            stuck = True
+                            z = z + h * (xa + 0.5 * sr * h) - h * x + h * wz
+                            vv = 0.0 * vv
+                            Fb = (ua + suc * h) - a2[p] * x + a3[p] * z + g
+                            if Fb.real > up.real or Fb.real < dn.real:
+                                fb = up if Fb.real > up.real else dn
+                                dF = Fb - F
+                                tc = div(fb - F, dF) if dF.real != 0.0 else 1.0 + 0.0 * dF
+                                if tc.real < 0.0:
+                                    tc = 0.0 * tc
+                                elif tc.real > 1.0:
+                                    tc = 1.0 + 0.0 * tc
+                                r = (1.0 - tc) * h
+                                acc = Fb - fb  # net acceleration, ramping up from 0 over r
+                                vv = 0.5 * acc * r
+                                x = x + acc * r * r / 6.0
+                                md = 1 if Fb.real > up.real else -1
+                    if not (stuck or held):
+                        lvl = d0[p] if md == 1 else d1[p]
+                        if on_st:
+                            sq = div(vv, vs[p])
+                            lvl = lvl * (1.0 + (rs[p] - 1.0) * exp(-(sq * sq)))
+                        gin = ua + g - lvl
+                        xin = xa + wz
+                        zn = PH[p, 0, 0] * z + PH[p, 0, 1] * x + PH[p, 0, 2] * vv + GA[p, 0, 0] * xin + GA[p, 0, 1] * gin + GB[p, 0, 0] * sr + GB[p, 0, 1] * suc
+                        xn = PH[p, 1, 0] * z + PH[p, 1, 1] * x + PH[p, 1, 2] * vv + GA[p, 1, 0] * xin + GA[p, 1, 1] * gin + GB[p, 1, 0] * sr + GB[p, 1, 1] * suc
+                        vn = PH[p, 2, 0] * z + PH[p, 2, 1] * x + PH[p, 2, 2] * vv + GA[p, 2, 0] * xin + GA[p, 2, 1] * gin + GB[p, 2, 0] * sr + GB[p, 2, 1] * suc
+                        if md * vn.real <= 0.0 and frictional:
+                            # ẋ reached zero inside the sub-step: interpolate the instant, then reverse (if
+                            # the drive beats the other side's breakaway level) or stick.  Without friction
+                            # nothing sticks: the linear model exactly.
+                            dv = vv - vn
+                            tc = div(vv, dv) if dv.real != 0.0 else 1.0 + 0.0 * dv
+                            if tc.real < 0.0:
+                                tc = 0.0 * tc
+                            elif tc.real > 1.0:
+                                tc = 1.0 + 0.0 * tc
+                            r = (1.0 - tc) * h
+                            F = (ua + suc * h) + g - a2[p] * xn + a3[p] * zn
+                            if md == 1:
+                                rev = F.real < dn.real
+                                f_new = dn
+                            else:
+                                rev = F.real > up.real
+                                f_new = up
+                            if rev:
+                                df = f_new - lvl  # friction change over the remaining r seconds
+                                vn = vn - df * r
+                                xn = xn - 0.5 * df * r * r
+                                if md * vn.real < 0.0:
+                                    md = -md
+                                else:
+                                    vn = 0.0 * vn
+                                    md = 0
+                            else:
+                                xn = xn - 0.5 * vn * r  # undo the overshoot past the stop
+                                vn = 0.0 * vn
+                                md = 0
+                        z = zn
+                        x = xn
+                        vv = vn
+                    if wx:
+                        xw[p] += x - x_old
+                    if on_bl:
+                        if (x - xt[p]).real > half[p].real:
+                            xt[p] = x - half[p]
+                        elif (x - xt[p]).real < -half[p].real:
+                            xt[p] = x + half[p]
+                    if on_rs:
+                        acc = div(vv - v_old, h)
+                        qdd = -2.0 * zr[p] * wr[p] * qd[p] - wr[p] * wr[p] * q[p] - kr[p] * acc
+                        qd[p] += h * qdd
+                        q[p] += h * qd[p]
+                ei[p] = z
+                xm[p] = x
+                v[p] = vv
+                dir_[p] = md
+            continue
+        for j in range(nsub):
+            f = j / nsub
+            xrj = xr[k] + f * (xr[k + 1] - xr[k])
+            vrj = vr[k] + f * (vr[k + 1] - vr[k])
+            for p in range(P):
+                xfb = xt[p] if (two and not fb_motor) else xm[p]
+                xp = (1.0 - psi[p]) * xfb + psi[p] * xw[p]
+                if sampled:
+                    if j == 0:
+                        vfb = div(xm[p] - xm_prev[p], Ts) if not first[p] else 0.0
+                        xm_prev[p] = xm[p]
+                        ei_new = ei[p] + Ts * (xr[k] - xfb)
+                        if causal:
+                            vb_prev[p] = vb[p]
+                            if not starts[k]:
+                                vb[p] = (xr[k] - xr[k - 1]) / Ts
+                            else:
+                                vb[p] = vr[k] - 0.5 * ar[k] * Ts if warm[k] else 0.0
+                            uh = div(b0[p] * (vb[p] - vb_prev[p]), Ts) + b1[p] * vb[p]
+                        else:
+                            uh = b0[p] * ar[k] + b1[p] * vr[k]
+                        uh += b2[p] * xr[k] + a3[p] * ei_new - a2[p] * xp - a1[p] * vfb
+                        wh = True
+                        if on_sa:
+                            ig = (xr[k] - xfb if psi[p].real == 0.0
+                                  else a3[p] * (xr[k] - xfb) - psi[p] * a2[p] * vfb)
+                            uh, wh = _clipped(uh, lim[p], lsl[p], vfb, ig, sa_windup)
+                        if wh:
+                            ei[p] = ei_new
+                        u = uh if first[p] else 0.5 * (u_last[p] + uh)
+                        u_last[p] = uh
+                        u_h[p] = uh
+                        wind_h[p] = wh
+                        first[p] = False
+                    else:
+                        u = u_h[p]
+                    wind = False
+                    wind_x[p] = wind_h[p]
+                else:
+                    u = b0[p] * ar[k] + b1[p] * vrj + b2[p] * xrj + a3[p] * ei[p] - a2[p] * xp - a1[p] * v[p]
+                    wind = True
+                    wind_x[p] = True
+                    if on_sa:
+                        ig = xrj - xfb if psi[p].real == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * v[p]
+                        u, wind = _clipped(u, lim[p], lsl[p], v[p], ig, sa_windup)
+                        wind_x[p] = wind
+                if want_u and j == 0:
+                    OUT_U[p, k] = u
+                if td_loop:
+                    u = _loop_delayed(buf, bi, p, u, dsteps[p], nbuf[p])
+                if cy_force:
+                    u -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
+                if two:
+                    dl = xm[p] - xt[p]
+                    ddl = v[p] - vt[p]
+                    hc = half_c[p]
+                    if hc.real > 0.0:
+                        if dl.real > hc.real:
+                            fc = kc[p] * (dl - hc) + cdmp[p] * ddl
+                            if fc.real < 0.0:
+                                fc = 0.0
+                        elif dl.real < -hc.real:
+                            fc = kc[p] * (dl + hc) + cdmp[p] * ddl
+                            if fc.real > 0.0:
+                                fc = 0.0
+                        else:
+                            fc = 0.0
+                    else:
+                        fc = kc[p] * dl + cdmp[p] * ddl
+                    vn = v[p] + div(h * (u - fc), mu[p])
+                    mt = 1.0 - mu[p]
+                    vtn = _friction_step(vt[p], fc, h, mt, d0[p], d1[p], rs[p], on_st, vs[p])
+                    v[p] = vn
+                    vt[p] = vtn
+                    xm[p] += h * vn
+                    xt[p] += h * vtn
+                    if wind:
+                        ei[p] += h * (xrj - xfb)
+                    if wind_x[p]:
+                        xw[p] += h * vn
+                    continue
+                vn = _friction_step(v[p], u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
+                acc = div(vn - v[p], h)
+                v[p] = vn
+                xm[p] += h * vn
+                if wind:
+                    ei[p] += h * (xrj - xfb)
+                if wind_x[p]:
+                    xw[p] += h * vn
+                if on_bl:
+                    if (xm[p] - xt[p]).real > half[p].real:
+                        xt[p] = xm[p] - half[p]
+                    elif (xm[p] - xt[p]).real < -half[p].real:
+                        xt[p] = xm[p] + half[p]
+                if on_rs:
+                    qdd = -2.0 * zr[p] * wr[p] * qd[p] - wr[p] * wr[p] * q[p] - kr[p] * acc
+                    qd[p] += h * qdd
+                    q[p] += h * qd[p]
+    if on_td and not td_loop:
+        for p in range(P):
+            if tau[p].real > 0.0:
+                _delay_output(OUT[p], starts, tau[p], Ts)
+
+
+def _padded_modes(modes: np.ndarray) -> np.ndarray:
+    """``modes`` as the kernel's int64 array of :data:`N_MODES` slots (a shorter one padded with zeros)."""
+    md = np.ascontiguousarray(modes, dtype=np.int64)
+    if md.size < N_MODES:
+        md = np.concatenate([md, np.zeros(N_MODES - md.size, dtype=np.int64)])
+    return md
+
+
+def _runnable(TH: np.ndarray, E: np.ndarray) -> np.ndarray:
+    """Per row, whether the parameters are a model to simulate: finite, the dead time in [0, 1] s
+    (a diverged fit step is not)."""
+    delay = E[:, _DELAY].real
+    return np.isfinite(TH).all(axis=1) & np.isfinite(E).all(axis=1) & (delay >= 0.0) & (delay <= 1.0)
+
+
+def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, warm,
+          u_out: np.ndarray | None = None, load: np.ndarray | None = None, start_rule: int = 0) -> np.ndarray:
+    """:func:`_kernel_many` on P sets of parameters of number type ``dtype`` (float or complex);
+    rows that are no model to simulate (:func:`_runnable`) are NaN.  ``u_out`` (N,), one set
+    only: filled with the u the set applied.  ``load`` (N,), mm/s²: an external acceleration
+    added to the command drive (:class:`ident.simulation.FreeRun`'s disturbance).
+    ``start_rule``: 0 a segment starts at rest (or warm), 1 as the identification's free run
+    does (:mod:`ident.simulation`: z = 0, ẋ = ẋ_r)."""
+    x_r = np.ascontiguousarray(x_r, dtype=float)
+    n = x_r.size
+    TH = np.ascontiguousarray(thetas, dtype=dtype).reshape(-1, 8)
+    E = np.ascontiguousarray(eps, dtype=dtype).reshape(-1, N_EP)
+    ok = _runnable(TH, E)
+    y = np.empty((int(np.count_nonzero(ok)), n), dtype=dtype)
+    out_u = np.empty((y.shape[0], n) if u_out is not None else (0, 0), dtype=dtype)
+    if y.shape[0]:
+        _kernel_many(x_r, np.ascontiguousarray(derivs[0], dtype=float), np.ascontiguousarray(derivs[1], dtype=float),
+                     np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(starts, dtype=np.bool_),
+                     *_warm_arrays(warm, n), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]),
+                     np.ascontiguousarray(flags, dtype=np.int64), np.ascontiguousarray(E[ok]), _padded_modes(modes),
+                     y, out_u, np.zeros(n) if load is None else np.ascontiguousarray(load, dtype=float),
+                     int(start_rule))
+        if u_out is not None:
+            u_out[:] = out_u[0]
+    if ok.all():
+        return y
+    out = np.full((TH.shape[0], n), np.nan, dtype=dtype)
+    out[ok] = y
+    return out
+
+
+def _warm_arrays(warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's (mask, v, a) of warm restarts: none when ``warm`` is None (v, a never read then)."""
+    if warm is None:
+        unused = np.zeros(n)
+        return np.zeros(n, dtype=np.bool_), unused, unused
+    return (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
+            np.ascontiguousarray(warm[2], dtype=float))
