@@ -399,14 +399,17 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 if warm[k]:
                     vk = vw[k]
                     ak = aw[k]
-                    if on_td and not td_loop:
+                    # a velocity of exactly 0 is a restart at rest: ak is then the force
+                    # friction holds (the integral holds it), not an acceleration
+                    at_rest = vk.real == 0.0
+                    if on_td and not td_loop and not at_rest:
                         xm[p] += tau[p] * (vk + 0.5 * tau[p] * ak)
                         vk += tau[p] * ak
                         xt[p] = xm[p]
                     if on_cy and not cy_force:
                         xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                         xt[p] = xm[p]
-                    v[p] = vk - 0.5 * h * ak
+                    v[p] = 0.0 if at_rest else vk - 0.5 * h * ak
                     vt[p] = v[p]
                     lvl = 0.0
                     if vk.real != 0.0:
@@ -418,7 +421,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     if cy_force:
                         u0 += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                     if two:
-                        fc = (1.0 - mu[p]) * ak + lvl
+                        fc = ak if at_rest else (1.0 - mu[p]) * ak + lvl
                         if fc.real != 0.0 and rec_motor:
                             xt[p] = xm[p] - div(fc, kc[p])  # the recorded state is the motor's
                         elif fc.real != 0.0:
@@ -433,7 +436,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     e_int = 0.0
                     ff = b0[p] * ar[k] + b1[p] * vr[k]
                     if sampled:
-                        vf = vk - 0.5 * Ts * ak
+                        vf = 0.0 if at_rest else vk - 0.5 * Ts * ak
                         xm_prev[p] = xm[p] - vf * Ts
                         e_int = Ts * (xr[k] - xfb)
                         vb[p] = vr[k] - 1.5 * ar[k] * Ts
@@ -634,7 +637,10 @@ def simulate_augmented(
         velocity and acceleration there (mm/s, mm/s², read at those starts only): the model
         starts at the recorded position and velocity, a gap's far side leading the way the
         command moves, the integral holding the force of the recorded acceleration against
-        friction — the base model's state exactly.  Default none: every segment starts at rest.
+        friction — the base model's state exactly.  A velocity of exactly 0 restarts at
+        rest: the acceleration given is then the force friction holds there (mm/s², the
+        integral holding it; :meth:`~ident.diagnosis.spec.Chunk.rests`).  Default none:
+        every segment starts at rest with the integral at equilibrium.
     """
     x_r = np.ascontiguousarray(x_r, dtype=float)
     n = x_r.size
