@@ -122,7 +122,7 @@ def test_the_two_readings_of_the_held_out_data_share_the_level_of_the_test():
         sc.at_rest = _Scored([spec], [rr], [rr], [0.0])
         return sc
 
-    ok, gain, _folds, ev, _a, _b = _passes(scored(drive(2.7 * 1.01)), scored(drive(None)), 2, DEFAULT)
+    ok, gain, _folds, ev, _a, _b = _passes(scored(drive(2.7 * 1.01)), scored(drive(None)), "stribeck", DEFAULT)
     assert ok and ev["held_out_judged_on"] in ("free run", "restarted at rest")
     # Bonferroni over the two readings and the four statistics of each
     assert ev["threshold"] == pytest.approx(chi2.ppf(1.0 - DEFAULT.alpha / 8.0, 2))
