@@ -298,7 +298,10 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 if warm[k]:
                     vk = vw[k]
                     ak = aw[k]
-                    if on_td and not td_loop:
+                    # a velocity of exactly 0 is a restart at rest: ak is then the force
+                    # friction holds (the integral holds it), not an acceleration
+                    at_rest = vk.real == 0.0
+                    if on_td and not td_loop and not at_rest:
                         xm[p] += tau[p] * (vk + 0.5 * tau[p] * ak)
                         vk += tau[p] * ak
                         xt[p] = xm[p]
@@ -306,7 +309,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                         xt[p] = xm[p]
                     # Euler's velocities live at half sub-steps; the exact step's at the sub-step.
-                    v[p] = vk if exact else vk - 0.5 * h * ak
+                    v[p] = vk if exact or at_rest else vk - 0.5 * h * ak
                     vt[p] = v[p]
                     if exact and vk.real != 0.0:
                         dir_[p] = 1 if vk.real > 0.0 else -1
@@ -320,7 +323,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     if cy_force:
                         u0 += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                     if two:
-                        fc = (1.0 - mu[p]) * ak + lvl
+                        fc = ak if at_rest else (1.0 - mu[p]) * ak + lvl
                         if fc.real != 0.0 and rec_motor:
                             xt[p] = xm[p] - div(fc, kc[p])  # the recorded state is the motor's
                         elif fc.real != 0.0:
@@ -335,7 +338,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     e_int = 0.0
                     ff = b0[p] * ar[k] + b1[p] * vr[k]
                     if sampled:
-                        vf = vk - 0.5 * Ts * ak
+                        vf = 0.0 if at_rest else vk - 0.5 * Ts * ak
                         xm_prev[p] = xm[p] - vf * Ts
                         e_int = Ts * (xr[k] - xfb)
                         vb[p] = vr[k] - 1.5 * ar[k] * Ts

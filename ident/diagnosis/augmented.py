@@ -253,7 +253,10 @@ def simulate_augmented(
         velocity and acceleration there (mm/s, mm/s², read at those starts only): the model
         starts at the recorded position and velocity, a gap's far side leading the way the
         command moves, the integral holding the force of the recorded acceleration against
-        friction — the base model's state exactly.  Default none: every segment starts at rest.
+        friction — the base model's state exactly.  A velocity of exactly 0 restarts at
+        rest: the acceleration given is then the force friction holds there (mm/s², the
+        integral holding it; :meth:`~ident.diagnosis.spec.Chunk.rests`).  Default none:
+        every segment starts at rest with the integral at equilibrium.
     """
     x_r = np.ascontiguousarray(x_r, dtype=float)
     n = x_r.size

@@ -40,6 +40,7 @@ import math
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Any, Callable
 
 import numpy as np
@@ -55,7 +56,7 @@ from ident.diagnosis.candidates import (base_variants, fit_spec, refit_base, sea
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, TimeDelay, effect_parameters
 from ident.diagnosis.intervals import at_bound, effect_intervals
-from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, simulate_spec, sse
+from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, rest_residual, simulate_spec, sse
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
 from ident.model import BASE_KEYS, base_vector
@@ -215,6 +216,14 @@ class _Scored:
     raw_r: list[np.ndarray]
     train_sse: list[float]
     free_run: "_Scored | None" = None
+    #: computes the same models on the held-out data restarted at rest
+    #: (``DiagnosisConfig.accept_on_rests``, :func:`~ident.diagnosis.spec.rest_residual`)
+    rest_reading: "Callable[[], _Scored] | None" = None
+
+    @cached_property
+    def at_rest(self) -> "_Scored | None":
+        """The held-out data restarted at rest (when first asked for); None where no fold holds a dwell."""
+        return self.rest_reading() if self.rest_reading is not None else None
 
     @property
     def free(self) -> "_Scored":
@@ -506,11 +515,52 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig) -> dic
             "fits_training": bool(nested)}
 
 
+def _readings(sc: "_Scored", ref: "_Scored", effect: str,
+              cfg: DiagnosisConfig) -> list[tuple[str, "_Scored", "_Scored", DiagnosisConfig]]:
+    """The readings of the held-out data the rule may judge ``effect`` by: (name, model,
+    reference, config).
+
+    The free run (or the windows of ``accept_on_windows``); for an effect of
+    ``cfg.rest_effects``, with ``accept_on_rests`` and a dwell in the held-out data, also the
+    run restarted at rest (:func:`~ident.diagnosis.spec.rest_residual`).  Two readings of
+    the same data: each at half the level (Bonferroni), so the rule's family-wise error
+    stays ``cfg.alpha``.
+    """
+    if effect not in cfg.rest_effects or sc.at_rest is None or ref.at_rest is None:
+        return [("free run", sc, ref, cfg)]
+    half = replace(cfg, alpha=cfg.alpha / 2.0)
+    return [("free run", sc, ref, half), ("restarted at rest", sc.at_rest, ref.at_rest, half)]
+
+
+def _passes(sc: "_Scored", ref: "_Scored", effect: str, cfg: DiagnosisConfig
+            ) -> tuple[bool, float, bool, dict, "_Scored", "_Scored"]:
+    """The held-out part of the rule on the first reading (:func:`_readings`) it holds on,
+    else on the free run: (passes, gain, improves every fold, evidence, model and reference
+    as read there).  Evidence significant and ``cfg.min_relevant`` of the residual removed;
+    the evidence names the reading (``held_out_judged_on``) with the others' figures beside it."""
+    told = []
+    for name, a, b, c in _readings(sc, ref, effect, cfg):
+        gain, folds_ok, _gw = _gain(a, b)
+        ev = evidence(a, b, EFFECT_MODELS[effect].added, c)
+        told.append((name, gain, folds_ok, ev, a, b))
+    name, gain, folds_ok, ev, a, b = next((t for t in told if t[3]["significant"] and t[1] >= cfg.min_relevant),
+                                         told[0])
+    if len(told) > 1:
+        other = [t for t in told if t[0] != name][0]
+        key = "held_out_rests" if other[0] == "restarted at rest" else "held_out_free_run"
+        ev = {**ev, "held_out_judged_on": name,
+              "held_out_rms_before_mm": b.raw_rms, "held_out_rms_after_mm": a.raw_rms,
+              f"{key}_residual_reduction": other[1], f"{key}_likelihood_ratio": other[3]["likelihood_ratio"],
+              f"{key}_significant": other[3]["significant"],
+              f"{key}_rms_before_mm": other[5].raw_rms, f"{key}_rms_after_mm": other[4].raw_rms}
+    return bool(ev["significant"] and gain >= cfg.min_relevant), gain, folds_ok, ev, a, b
+
+
 def _earns(sc: "_Scored", ref: "_Scored", effect: str, cfg: DiagnosisConfig) -> bool:
     """Does ``effect`` in ``sc`` pass the acceptance rule against ``ref`` on held-out evidence
-    alone (:func:`evidence` significant and ``cfg.min_relevant`` of the residual removed)?"""
-    return (evidence(sc, ref, EFFECT_MODELS[effect].added, cfg)["significant"]
-            and _gain(sc, ref)[0] >= cfg.min_relevant)
+    alone (:func:`_passes`: evidence significant and ``cfg.min_relevant`` of the residual
+    removed, on the free run or restarted at rest)?"""
+    return _passes(sc, ref, effect, cfg)[0]
 
 
 def _judge(eff: str, sc: "_Scored", ref: "_Scored", chunk: Chunk, noise: float,
@@ -522,12 +572,11 @@ def _judge(eff: str, sc: "_Scored", ref: "_Scored", chunk: Chunk, noise: float,
     (:func:`_plausible`) and it explains more than the noise (:func:`_above_noise`).
     Returns (accepted, gain, improves every fold, evidence, why not plausible).
     """
-    gain, folds_ok, _gw = _gain(sc, ref)
-    ev = evidence(sc, ref, EFFECT_MODELS[eff].added, cfg)
+    ok, gain, folds_ok, ev, a, b = _passes(sc, ref, eff, cfg)
     plaus, why = _plausible(eff, sc, chunk, cfg)
     if plaus:
-        plaus, why = _above_noise(sc, ref, noise, cfg)
-    return bool(ev["significant"] and gain >= cfg.min_relevant and plaus), gain, folds_ok, ev, why
+        plaus, why = _above_noise(a, b, noise, cfg)
+    return bool(ok and plaus), gain, folds_ok, ev, why
 
 
 def _plausible(eff: str, sc: "_Scored", chunk: Chunk, cfg: DiagnosisConfig) -> tuple[bool, str]:
@@ -736,6 +785,12 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     shots = ([te.shots(cfg.shooting_window_s, cfg.shooting_lead_s) for _, te in folds]
              if cfg.shooting_window_s > 0 else [])
 
+    # the held-out data restarted at rest at the end of every dwell of the command (every
+    # fold's, or none: the two readings are then taken on every fold alike)
+    rest_chunks = [te.rests(cfg.rest_restart_s) for _, te in folds] if cfg.accept_on_rests else []
+    if any(rc is None for rc in rest_chunks):
+        rest_chunks = []
+
     def window_residual(s: ModelSpec, i: int) -> np.ndarray:
         # the restart states every model misreads, estimated per window for reference and
         # candidate alike: shared nuisance parameters, no degree of freedom of the effect
@@ -748,6 +803,12 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         rs = [te.w[te.score] * r for r, (_, te) in zip(raw, folds)]
         train = [sse(s, tr) for s, (tr, _) in zip(specs, folds)]
         free = _Scored(specs, rs, raw, train)
+        if rest_chunks:  # the same held-out data restarted at rest, the held force profiled
+            def rest_reading() -> _Scored:
+                rraw = [rest_residual(s, rc, cfg.rest_force_grid, cfg.rest_force_span)
+                        for s, rc in zip(specs, rest_chunks)]
+                return _Scored(specs, [rc.w[rc.score] * r for r, rc in zip(rraw, rest_chunks)], rraw, train)
+            free.rest_reading = rest_reading
         if not cfg.accept_on_windows:
             return free
         ws = [window_residual(s, i) for i, s in enumerate(specs)]
@@ -1111,8 +1172,9 @@ def _candidate(eff: str, sc: _Scored, before: float, after: float, ok: bool, gai
         "signature": sigs.get(eff, {}),
         "size_test": "passed" if not implausible else f"failed: {implausible}",
         **(ev or {}),
-        "held_out_rms_before_mm": float(rms_before),
-        "held_out_rms_after_mm": float(sc.raw_rms),
+        # the rms of the reading judged (given in ev when it is not the free run's)
+        "held_out_rms_before_mm": float((ev or {}).get("held_out_rms_before_mm", rms_before)),
+        "held_out_rms_after_mm": float((ev or {}).get("held_out_rms_after_mm", sc.raw_rms)),
     }
     if added_to:
         score["added_to"] = list(added_to)
@@ -1148,7 +1210,10 @@ def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candi
                                  c.unresolved if c else None)
             if c is not None:  # the evidence beside the statement
                 words += f", removing {100 * c.score['held_out_residual_reduction']:.0f} % of the held-out residual"
-                if "held_out_free_run_residual_reduction" in c.score:  # judged on the windows
+                if c.score.get("held_out_judged_on") == "restarted at rest":
+                    words += (f" restarted at rest after every dwell of the command "
+                              f"({100 * c.score['held_out_free_run_residual_reduction']:.0f} % in free run)")
+                elif "held_out_free_run_residual_reduction" in c.score:  # judged on the windows
                     words += (f" over windows of {c.score['held_out_windows_s']:g} s from the recorded state "
                               f"({100 * c.score['held_out_free_run_residual_reduction']:.0f} % in free run)")
             return words

@@ -205,12 +205,55 @@ class Chunk:
                      (self.derivs[0][i], self.derivs[1][i]), self.w[i], np.concatenate(score),
                      (np.concatenate(warm), np.concatenate(vw), np.concatenate(aw)), estimate_states=True)
 
+    def rests(self, rest_s: float) -> "Chunk | None":
+        """The same samples, the simulation restarted at rest at the end of every dwell of
+        the command at least ``rest_s`` long (its last sample before the command moves
+        again): the held-out reading of :func:`rest_residual`.
+
+        At such a restart the model's axis is put at the recorded position at rest
+        (``warm`` with velocity 0; the force friction holds there is what
+        :func:`rest_residual` profiles) — only where the recording shows the axis at rest:
+        the slope of a straight line fitted to its last ``rest_s`` of positions within three
+        standard errors of 0 (an axis still creeping towards the command is moving, and a
+        restart at rest would misread it).  A restart after the segment's first ``rest_s``
+        only; None when the chunk holds no such dwell.  Every sample scored in the chunk
+        stays scored: a restart at rest misreads nothing the model can know (a stuck axis
+        shows no force), so there is no lead-in.
+        """
+        k_rest = max(int(round(rest_s / self.Ts)), 1)
+        still = self.derivs[0] == 0.0
+        starts = self.starts.copy()
+        seg_start = np.maximum.accumulate(np.where(self.starts, np.arange(self.n), 0))
+        run = 0
+        for k in range(self.n - 1):
+            run = 0 if self.starts[k] else run
+            run = run + 1 if still[k] else 0
+            if (run >= k_rest and not still[k + 1] and not self.starts[k + 1] and k - seg_start[k] >= k_rest
+                    and _at_rest(self.x[k + 1 - k_rest : k + 1])):
+                starts[k] = True
+        added = starts & ~self.starts
+        if not added.any():
+            return None
+        return replace(self, starts=starts, warm=(added, np.zeros(self.n), np.zeros(self.n)),
+                       estimate_states=False)
+
     def _take(self, keep: np.ndarray, starts: np.ndarray, score: np.ndarray,
               warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> "Chunk":
         """The samples of ``keep`` with the given starts, scored samples and warm restarts."""
         i = np.flatnonzero(keep)
         return Chunk(self.x_r[i], self.x[i], self.Ts, starts[i], (self.derivs[0][i], self.derivs[1][i]),
                      self.w[i], score[i], None if warm is None else tuple(a[i] for a in warm))
+
+
+def _at_rest(x: np.ndarray) -> bool:
+    """Does the recorded position ``x`` (a stretch of samples) show no motion: the slope of
+    the straight line fitted to it within three standard errors of 0?"""
+    t = np.arange(x.size) - 0.5 * (x.size - 1)
+    stt = float(t @ t)
+    slope = float(t @ (x - x.mean())) / stt
+    res = x - x.mean() - slope * t
+    se = math.sqrt(float(res @ res) / max(x.size - 2, 1) / stt)
+    return abs(slope) <= 3.0 * se
 
 
 #: Samples either side of a warm restart its velocity and acceleration are read from.
@@ -358,6 +401,44 @@ def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None, *,
     r = chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
     effects = () if shared_states else spec.effects
     return estimated_states(r, effects, spec.ep, spec.modes, chunk, restart_responses(spec, chunk, m), m)
+
+
+def rest_residual(spec: ModelSpec, chunk: Chunk, grid: int, span: float = 1.0) -> np.ndarray:
+    """Raw residual x̂ − x (mm) on ``chunk``'s scored samples, ``chunk`` restarted at rest
+    (:meth:`Chunk.rests`), the force friction holds at each restart profiled out.
+
+    At rest the recorded position shows where a stuck axis stands, not the force its
+    friction holds: the integral may have wound up to anywhere in the stick band
+    [r·d1, r·d0] (eq. 3.2 with its breakaway ratio r, 1 without Stribeck friction), and
+    when the axis breaks away again follows from it.  Each window between restarts is
+    simulated from ``grid`` forces spread evenly over ``span`` × the model's own stick band
+    (a sampled loop's held output may exceed it while its axis slips by less than the
+    encoder resolves) and keeps
+    the one that predicts the window best: the profile likelihood of the held-out data
+    with that force a nuisance parameter of every window, one per window for any model.
+    Over a free run a stick-slip model's breakaways drift in phase (one missed breakaway
+    leaves the axis stuck at another place until the next move); restarted at every rest
+    the model is judged on what it predicts from there: when it breaks away, how far it
+    slides, where it sticks.
+    """
+    d0, d1 = float(spec.theta[6]), float(spec.theta[7])
+    r = float(spec.ep[EP_INDEX["static_to_coulomb_ratio"]]) if "stribeck" in spec.effects else 1.0
+    lo, hi = span * r * min(d0, d1, 0.0), span * r * max(d0, d1, 0.0)
+    on = chunk.warm[0]
+    win = (np.cumsum(chunk.starts) - 1)[chunk.score]
+    nw = int(np.count_nonzero(chunk.starts))
+    best = np.full(nw, np.inf)
+    out = np.full(win.size, np.inf)
+    for force in np.linspace(lo, hi, max(grid, 1)):
+        c = replace(chunk, warm=(on, chunk.warm[1], np.where(on, force, 0.0)))
+        res = simulate_spec(spec, c)[chunk.score] - chunk.x[chunk.score]
+        with np.errstate(all="ignore"):
+            e = np.bincount(win, weights=res * res, minlength=nw)
+        better = e < best
+        best = np.where(better, e, best)
+        take = better[win]
+        out[take] = res[take]
+    return out
 
 
 #: Offsets of a restart's position (mm), velocity (mm/s) and acceleration (mm/s²) whose
