@@ -524,9 +524,14 @@ def _readings(sc: "_Scored", ref: "_Scored", effect: str,
     ``cfg.rest_effects``, with ``accept_on_rests`` and a dwell in the held-out data, also the
     run restarted at rest (:func:`~ident.diagnosis.spec.rest_residual`).  Two readings of
     the same data: each at half the level (Bonferroni), so the rule's family-wise error
-    stays ``cfg.alpha``.
+    stays ``cfg.alpha``.  Only while every effect of both models reads at a rest: a restart
+    at rest forgets what a rest does not show of the others (which side of a gap the motor
+    rests on, a delay's history), and the effect judged would be credited with that misread
+    of the reference.
     """
-    if effect not in cfg.rest_effects or sc.at_rest is None or ref.at_rest is None:
+    present = {e for m in (sc, ref) for spec in m.specs for e in spec.effects}
+    if (effect not in cfg.rest_effects or not present <= set(cfg.rest_effects)
+            or sc.at_rest is None or ref.at_rest is None):
         return [("free run", sc, ref, cfg)]
     half = replace(cfg, alpha=cfg.alpha / 2.0)
     return [("free run", sc, ref, half), ("restarted at rest", sc.at_rest, ref.at_rest, half)]
