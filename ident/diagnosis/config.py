@@ -173,8 +173,8 @@ class DiagnosisConfig:
     #: "accept_on_windows": true}'): drive-zoo-dev 21/21 as main (case_014's delay without
     #: the resonance shooting alone adds beside it), drive-zoo-dev2 20/28 as main but not
     #: the same: case_014's saturation named resonance (a 14.7 Hz mode on the recorded
-    #: position, 7 % of the held-out windows' residual, −0.5 % in free run) where main says
-    #: none, case_015's mode none where main names a dead time; false alarms on clean cases
+    #: position, 7 % of the held-out windows' residual, −0.5 % in free run) where the free
+    #: run named nothing, case_015's mode none where the free run named a dead time; false alarms on clean cases
     #: 0/7.  On the windows eight candidates of a wrong effect pass alone that the free run
     #: refuses.  1.28× the CPU of the default (bench_diagnosis_speed.py --compare, shooting
     #: included).
@@ -200,7 +200,10 @@ class DiagnosisConfig:
     #: side of a gap the motor rests on, a delay's history — and their fits then take up
     #: the profiled force's misreads: on the development zoos a gap passed alone restarted
     #: at rest on two time-delay and Stribeck cases (9–11 %), and a dead time beside a gap
-    #: (4 %) became a second effect; judged on the free run alone they pass nowhere.
+    #: (4 %) became a second effect; judged on the free run alone they pass nowhere.  So
+    #: the restarted reading is taken only while every effect of both models compared is one
+    #: of these (diagnose._readings): beside a gap a Stribeck curve took up the gap model's
+    #: misread (drive-zoo-dev case_001 named backlash + stribeck).
     rest_effects: tuple[str, ...] = ("stribeck",)
     #: … a dwell of the command at least this long ends in a restart (s): longer than a
     #: move's settling on the loops CNC drives have (bandwidth ≥ 20 Hz: 8 ms time constants) …
