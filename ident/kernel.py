@@ -412,7 +412,10 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         if want_u and j == 0:
                             OUT_U[p, k] = u
                         if td_loop:
+                            # the drive applies what its loop computed a dead time ago: the
+                            # loop's law does not act inside the sub-step either
                             u = _loop_delayed(buf, bi, p, u, dsteps[p], nbuf[p])
+                            held = True
                         if cy_force:
                             u -= cs[p] * sin(tw[p] * x) + cc[p] * cos(tw[p] * x)
                         g = u - ulin
@@ -425,12 +428,14 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     x_old = x
                     stuck = False
                     if held:
-                        # Clipped, the drive applies the limit whatever the loop's state: the
-                        # held-input correction of the exponential step would let the loop's
-                        # law (an integral wound up by a3·h·(x_r − x) per sub-step, as large
-                        # as the limit itself) act inside the sub-step.  The mass under the
-                        # held force, exact for a force held over the sub-step (friction and
-                        # its Karnopp stop as _friction_step), the integral by the trapezoid.
+                        # Clipped, or a dead time in the loop, the drive applies a force its
+                        # loop's present state does not set: the held-input correction of the
+                        # exponential step would let the loop's law act inside the sub-step (a
+                        # clipped integral wound up by a3·h·(x_r − x) per sub-step, as large
+                        # as the limit itself; a delay shortened by the feedback acting at
+                        # once).  The mass under the held force, exact for a force held over
+                        # the sub-step (friction and its Karnopp stop as _friction_step), the
+                        # integral by the trapezoid.
                         vn = _friction_step(vv, u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
                         xn = x + 0.5 * h * (vv + vn)
                         if wx:

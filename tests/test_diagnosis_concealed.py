@@ -23,14 +23,11 @@ FIX = Path(__file__).resolve().parents[1] / "fixtures" / "diagnosis"
 CASES = json.loads((FIX / "cases.json").read_text()) if (FIX / "cases.json").exists() else {}
 
 # Classes the current augmented models do not yet recover on the virtual CNC (see
-# docs/diagnosis.md, "Known misses"); kept as strict xfails so a fix shows up at once.
+# docs/diagnosis.md, "Known limits"); kept as strict xfails so a fix shows up at once.
 # Resonance since the one general search replaced the restarts tuned to single seeds
 # (velocity-gain restarts, every-start backlash fits, the preference for a mode at the
-# spectrum peak): the mode is fitted at 300 Hz instead of 100 Hz.  Backlash: the gap fit is
-# fragile (the training cost prefers a smaller gap with the motor share at its bound) and
-# with the fits' linear algebra in a fixed order (ident.fixed_order) a 2.4 ms dead time is
-# named in its place, on every machine alike, so a strict xfail holds everywhere.
-KNOWN_MISSES: set[str] = {"resonance", "backlash"}
+# spectrum peak): the mode is fitted at 300 Hz instead of 100 Hz.
+KNOWN_MISSES: set[str] = {"resonance"}
 
 
 def load(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
