@@ -148,7 +148,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                  start_rule):
     """The free run of eq. 3.3 and the effects of :data:`EFFECTS` for P parameter sets in lockstep.
 
-    Rows of ``TH`` (P, 8) and ``EP`` (P, 13) are the sets, rows of ``OUT`` and ``OUT_U`` (P, N)
+    Rows of ``TH`` (P, 8) and ``EP`` (P, N_EP) are the sets, rows of ``OUT`` and ``OUT_U`` (P, N)
     their recorded positions and the u applied at each sample (``OUT_U`` of no columns: not
     wanted); flags, variants and sub-steps
     are common (a Jacobian's columns).  Generic in the number type of ``TH``/``EP`` (and of

@@ -228,7 +228,7 @@ def simulate_augmented(
         d0, d1 (mm/s²) of eq. 3.3.
     flags : ndarray of int (6,)
         1 for each effect of :data:`EFFECTS` that is switched on.
-    ep : ndarray (13,)
+    ep : ndarray (N_EP,)
         Effect parameters laid out as :data:`EP_INDEX`.
     modes : ndarray of int (6,)
         Variant of backlash (0 semi-closed loop, 1 two-mass full-closed loop, 2 two-mass
@@ -293,7 +293,7 @@ def simulate_augmented_many(
     ``simulate_augmented(..., thetas[p], ep=eps[p], ...)`` with the given ``nsub``.
 
     For the columns of a finite-difference Jacobian: the same effects, variants and
-    sub-steps, parameters differing (rows of ``thetas`` (P, 8) and ``eps`` (P, 13)).  The
+    sub-steps, parameters differing (rows of ``thetas`` (P, 8) and ``eps`` (P, N_EP)).  The
     sets are simulated in lockstep in one pass (:func:`ident.kernel._kernel_many`), which is faster than
     one after the other: a single free run waits on its own chain of dependent operations.
     """

@@ -366,13 +366,13 @@ def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) ->
     segment (one variance: the weights of the search).  A gap is then profiled under the
     last weights (:func:`profile_gap`).
     """
-    w_prev = chunk
+    fitted_on = chunk  # the weights of the last fit
     for step in range(cfg.segment_variance_steps):
         weighted = chunk.reweighted(simulate_spec(spec, chunk) - chunk.x)
-        if step and np.max(np.abs(weighted.w / w_prev.w - 1.0)) < cfg.segment_variance_tol:
+        if step and np.max(np.abs(weighted.w / fitted_on.w - 1.0)) < cfg.segment_variance_tol:
             break
-        spec, w_prev = fit_spec(spec, weighted, max_iter=cfg.segment_variance_iter, cfg=cfg), weighted
-    return profile_gap(spec, w_prev, cfg)
+        spec, fitted_on = fit_spec(spec, weighted, max_iter=cfg.segment_variance_iter, cfg=cfg), weighted
+    return profile_gap(spec, fitted_on, cfg)
 
 
 def profile_gap(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
@@ -407,8 +407,9 @@ def profile_gap(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpe
         if c1 < c_best:
             best, c_best = s1, c1
     free = fit_spec(best, chunk, max_iter=cfg.gap_profile_iter, also_free=freed, cfg=cfg)
-    if sse(free, chunk) <= c_best:
-        best, c_best = free, sse(free, chunk)
+    c_free = sse(free, chunk)
+    if c_free <= c_best:
+        best, c_best = free, c_free
     return best if c_best < c_spec else spec
 
 
@@ -580,7 +581,7 @@ def sampled_base(spec: ModelSpec, chunk: Chunk, max_iter: int = 30, causal: bool
     1/Ts would make the sampled loop unstable).
     """
     s = softened_base(spec, chunk.Ts) or spec.copy()
-    s.modes[4] = 2 if causal else 1
+    s.modes[MODE_SLOTS["controller"]] = 2 if causal else 1
     return refit_base(s, chunk, max_iter, cfg=cfg)
 
 

@@ -50,7 +50,7 @@ from threadpoolctl import threadpool_limits
 from core.effects import EFFECTS as REGISTRY
 from core.effects import parameter_units
 from core.errors import InputError
-from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, segment_starts
+from ident.diagnosis.augmented import CONTROLLERS, EFFECTS, MODE_SLOTS, segment_starts
 from ident.diagnosis.candidates import (base_variants, fit_spec, refit_base, search, segment_variance_fit,
                                         softened_base)
 from ident.diagnosis.config import DEFAULT, DiagnosisConfig
@@ -1025,7 +1025,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         })
     aug = {"base": dict(zip(BASE_KEYS, map(float, final.theta))),
            "effects": {e: effect_parameters(final, e, Ts) for e in accepted},
-           "controller": CONTROLLERS[int(final.modes[4])],
+           "controller": CONTROLLERS[int(final.modes[MODE_SLOTS["controller"]])],
            "held_out": scheme}
     named = accepted + (["external_force"] if external is not None and external.accepted else [])
     verdict: str | list[str]

@@ -35,7 +35,7 @@ import numpy as np
 
 from core.effects import EFFECTS as REGISTRY
 from core.effects import MODEL, shown_unit
-from ident.diagnosis.augmented import MODE_SLOTS, simulate_augmented
+from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS, simulate_augmented
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.spec import Chunk, ModelSpec, sse
 
@@ -153,6 +153,11 @@ class Effect:
         return told(p, key, fmt, _unit(self.name, key), intervals, unresolved)
 
 
+def _read(spec: ModelSpec, *names: str) -> dict[str, float]:
+    """The named effect parameters of ``spec`` (slots of ``EP_INDEX``) as floats."""
+    return {k: float(spec.ep[EP_INDEX[k]]) for k in names}
+
+
 def _variants(effect: str, key: str) -> tuple:
     """The words of ``effect``'s variant parameter ``key`` by the simulator's mode value (registry order)."""
     return REGISTRY[effect].choices(key, MODEL)
@@ -239,24 +244,22 @@ class Backlash(Effect):
         return out
 
     def parameters(self, spec, Ts=None):
-        ep = spec.ep
-        loop = _variants(self.name, "loop")[int(spec.modes[0])]
-        out = {"gap_mm": float(ep[0]), "loop": loop}
-        if spec.modes[0]:
-            out["motor_fraction"] = float(ep[11])
-            out["position_motor_share"] = float(ep[12])
+        loop = _variants(self.name, "loop")[int(spec.modes[MODE_SLOTS["backlash"]])]
+        out = {**_read(spec, "gap_mm"), "loop": loop}
+        if spec.modes[MODE_SLOTS["backlash"]]:
+            out.update(_read(spec, "motor_fraction", "position_motor_share"))
         return out
 
     def set_arrays(self, p, ep, modes):
-        ep[0] = p["gap_mm"]
+        ep[EP_INDEX["gap_mm"]] = p["gap_mm"]
         loops = _variants(self.name, "loop")
         if p.get("loop") in loops[1:]:
-            modes[0] = loops.index(p["loop"])
-            ep[11] = p.get("motor_fraction", 0.5)
-            ep[12] = p.get("position_motor_share", 0.0)
+            modes[MODE_SLOTS["backlash"]] = loops.index(p["loop"])
+            ep[EP_INDEX["motor_fraction"]] = p.get("motor_fraction", 0.5)
+            ep[EP_INDEX["position_motor_share"]] = p.get("position_motor_share", 0.0)
 
     def implausible(self, spec, chunk, cfg):
-        g = float(spec.ep[0])
+        g = float(spec.ep[EP_INDEX["gap_mm"]])
         return f"gap below {1e3 * cfg.min_gap_mm:.0f} µm" if g < cfg.min_gap_mm else ""
 
     def words(self, p, intervals=None, unresolved=None):
@@ -285,13 +288,14 @@ class Stribeck(Effect):
                 for r in (1.5, 3.0, 5.0) for v in (0.2, 1.0, 0.02 * _vmax(chunk))]
 
     def parameters(self, spec, Ts=None):
-        return {"static_to_coulomb_ratio": float(spec.ep[1]), "stribeck_velocity_mm_s": float(spec.ep[2])}
+        return _read(spec, "static_to_coulomb_ratio", "stribeck_velocity_mm_s")
 
     def set_arrays(self, p, ep, modes):
-        ep[1], ep[2] = p["static_to_coulomb_ratio"], p["stribeck_velocity_mm_s"]
+        for k in ("static_to_coulomb_ratio", "stribeck_velocity_mm_s"):
+            ep[EP_INDEX[k]] = p[k]
 
     def implausible(self, spec, chunk, cfg):
-        r = float(spec.ep[1])
+        r = float(spec.ep[EP_INDEX["static_to_coulomb_ratio"]])
         return (f"breakaway within {100 * (cfg.min_static_ratio - 1):.0f} % of Coulomb friction"
                 if r < cfg.min_static_ratio else "")
 
@@ -359,27 +363,26 @@ class Resonance(Effect):
         return out
 
     def parameters(self, spec, Ts=None):
-        ep = spec.ep
-        if spec.modes[3]:
+        if spec.modes[MODE_SLOTS["resonance"]]:
             # the free-free mode f and the motor's share μ trade along f·√μ, the frequency the
             # table rings at when a stiff velocity loop holds the motor: what a recording
             # fixes best (candidates.scan_motor_fraction), told beside f
             kinds, loops = _variants(self.name, "kind"), _variants(self.name, "loop")
-            return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "motor_fraction": float(ep[11]),
-                    "kind": kinds[1], "loop": loops[int(spec.modes[3]) - 1],
-                    "position_motor_share": float(ep[12]),
-                    "locked_motor_hz": float(ep[3]) * math.sqrt(max(float(ep[11]), 0.0))}
-        return {"freq_hz": float(ep[3]), "damping": float(ep[4]), "gain": float(ep[5]),
-                "kind": _variants(self.name, "kind")[0]}
+            out = _read(spec, "freq_hz", "damping", "motor_fraction")
+            return {**out, "kind": kinds[1], "loop": loops[int(spec.modes[MODE_SLOTS["resonance"]]) - 1],
+                    **_read(spec, "position_motor_share"),
+                    "locked_motor_hz": out["freq_hz"] * math.sqrt(max(out["motor_fraction"], 0.0))}
+        return {**_read(spec, "freq_hz", "damping", "gain"), "kind": _variants(self.name, "kind")[0]}
 
     def set_arrays(self, p, ep, modes):
-        ep[3], ep[4] = p["freq_hz"], p["damping"]
+        ep[EP_INDEX["freq_hz"]], ep[EP_INDEX["damping"]] = p["freq_hz"], p["damping"]
         if p.get("kind") == _variants(self.name, "kind")[1]:
-            modes[3] = 1 + _variants(self.name, "loop").index(p.get("loop", _variants(self.name, "loop")[0]))
-            ep[11] = p.get("motor_fraction", 0.5)
-            ep[12] = p.get("position_motor_share", ep[12])
+            loops = _variants(self.name, "loop")
+            modes[MODE_SLOTS["resonance"]] = 1 + loops.index(p.get("loop", loops[0]))
+            ep[EP_INDEX["motor_fraction"]] = p.get("motor_fraction", 0.5)
+            ep[EP_INDEX["position_motor_share"]] = p.get("position_motor_share", ep[EP_INDEX["position_motor_share"]])
         else:
-            ep[5] = p.get("gain", 1.0)
+            ep[EP_INDEX["gain"]] = p.get("gain", 1.0)
 
     def implausible(self, spec, chunk, cfg):
         # The definition of the effect (SPEC §7: a *lightly damped* structural mode, below the
@@ -388,7 +391,7 @@ class Resonance(Effect):
         # eq. 3.3's continuous loop lacks against a digital controller — on a clean LinuxCNC
         # axis such a 253 Hz "mode" at ζ 0.15 passed the likelihood test (26 % of the held-out
         # residual).  A damping at the lower bound is a mode whose damping is not resolved.
-        f, z = float(spec.ep[3]), float(spec.ep[4])
+        f, z = float(spec.ep[EP_INDEX["freq_hz"]]), float(spec.ep[EP_INDEX["damping"]])
         if f > 0.45 / chunk.Ts:
             return f"mode at {f:.0f} Hz, beyond 0.45/Ts"
         if z >= (1.0 - 1e-3) * cfg.max_mode_damping:
@@ -475,7 +478,8 @@ class TimeDelay(Effect):
         # delay_s is the drive's dead time; a model whose delay also carries the lag of
         # sampling (sampling_lag) says how much, and simulates delay_s + sampling_lag_s
         lag = self.sampling_lag(spec, Ts) if Ts else 0.0
-        out = {"delay_s": float(spec.ep[6]) - lag, "where": _variants(self.name, "where")[int(spec.modes[1])]}
+        out = {"delay_s": float(spec.ep[EP_INDEX["delay_s"]]) - lag,
+               "where": _variants(self.name, "where")[int(spec.modes[MODE_SLOTS["time_delay"]])]}
         if "delay_s" in spec.ranges:
             out["delay_range_s"] = [float(v) - lag for v in spec.ranges["delay_s"]]
         if lag:
@@ -483,8 +487,8 @@ class TimeDelay(Effect):
         return out
 
     def set_arrays(self, p, ep, modes):
-        ep[6] = p["delay_s"] + p.get("sampling_lag_s", 0.0)
-        modes[1] = 1 if p.get("where") == _variants(self.name, "where")[1] else 0
+        ep[EP_INDEX["delay_s"]] = p["delay_s"] + p.get("sampling_lag_s", 0.0)
+        modes[MODE_SLOTS["time_delay"]] = 1 if p.get("where") == _variants(self.name, "where")[1] else 0
 
     @staticmethod
     def sampling_lag(spec: ModelSpec, Ts: float) -> float:
@@ -499,7 +503,7 @@ class TimeDelay(Effect):
         (s1017.1, s1045.8, s5038.5), every fit on the sampled base within 0.15 ms of it
         (17 cases).  A capture delay lies outside the loop and carries no such lag.
         """
-        return Ts if (spec.modes[1] == 1 and not spec.sampled) else 0.0
+        return Ts if (spec.modes[MODE_SLOTS["time_delay"]] == 1 and not spec.sampled) else 0.0
 
     @classmethod
     def within_inherent_lag(cls, spec: ModelSpec, Ts: float) -> bool:
@@ -508,7 +512,7 @@ class TimeDelay(Effect):
         in the servo cycle the position is read, recorded or the output applied — and a
         recording sampled every Ts cannot tell it from a drive's dead time.  The dead time
         is the fitted delay less the lag of sampling it carries (:meth:`sampling_lag`)."""
-        return float(spec.ep[6]) - cls.sampling_lag(spec, Ts) <= Ts
+        return float(spec.ep[EP_INDEX["delay_s"]]) - cls.sampling_lag(spec, Ts) <= Ts
 
     def implausible(self, spec, chunk, cfg):
         return "delay within one sample period, the lag of sampling" if self.within_inherent_lag(spec, chunk.Ts) else ""
@@ -571,20 +575,22 @@ class CyclicError(Effect):
 
     def parameters(self, spec, Ts=None):
         ep = spec.ep
-        kind = _variants(self.name, "kind")[int(spec.modes[2])]
-        return {"period_mm": float(ep[7]), "amplitude": float(np.hypot(ep[8], ep[9])),
+        kind = _variants(self.name, "kind")[int(spec.modes[MODE_SLOTS["cyclic_error"]])]
+        c_s, c_c = ep[EP_INDEX["amplitude_sin"]], ep[EP_INDEX["amplitude_cos"]]
+        return {"period_mm": float(ep[EP_INDEX["period_mm"]]), "amplitude": float(np.hypot(c_s, c_c)),
                 "amplitude_unit": REGISTRY[self.name].parameter("amplitude").unit_by_variant[kind],
-                "phase_rad": float(np.arctan2(ep[9], ep[8])), "kind": kind}
+                "phase_rad": float(np.arctan2(c_c, c_s)), "kind": kind}
 
     def set_arrays(self, p, ep, modes):
-        ep[7] = p["period_mm"]
+        ep[EP_INDEX["period_mm"]] = p["period_mm"]
         phase = p.get("phase_rad", 0.0)
-        ep[8], ep[9] = p["amplitude"] * math.cos(phase), p["amplitude"] * math.sin(phase)
-        modes[2] = 1 if p.get("kind") == _variants(self.name, "kind")[1] else 0
+        ep[EP_INDEX["amplitude_sin"]] = p["amplitude"] * math.cos(phase)
+        ep[EP_INDEX["amplitude_cos"]] = p["amplitude"] * math.sin(phase)
+        modes[MODE_SLOTS["cyclic_error"]] = 1 if p.get("kind") == _variants(self.name, "kind")[1] else 0
 
     def implausible(self, spec, chunk, cfg):
         # an error is periodic only where a whole period is seen (cfg.min_periods over the travel)
-        period, travel = float(spec.ep[7]), float(np.ptp(chunk.x))
+        period, travel = float(spec.ep[EP_INDEX["period_mm"]]), float(np.ptp(chunk.x))
         if period * cfg.min_periods > travel:
             return f"period {period:.3g} mm longer than the {travel:.3g} mm travel recorded"
         return ""
@@ -603,8 +609,6 @@ class Saturation(Effect):
     """The control output clipped to ±limit, with (mode 0) or without (mode 1) anti-windup."""
 
     name = REGISTRY["saturation"].name
-    added = 1
-
     added = 2
     #: an integral wound up while the output is clipped is a state no recording shows: a
     #: window restarted mid-move sets it to hold the recorded acceleration, so the variant
@@ -652,15 +656,15 @@ class Saturation(Effect):
         return out
 
     def parameters(self, spec, Ts=None):
-        return {"limit": float(spec.ep[10]), "limit_unit": REGISTRY[self.name].parameter("limit").unit,
-                "limit_slope": float(spec.ep[13]), "position_motor_share": float(spec.ep[12]),
-                "anti_windup": _variants(self.name, "anti_windup")[int(spec.modes[5])]}
+        return {**_read(spec, "limit"), "limit_unit": REGISTRY[self.name].parameter("limit").unit,
+                **_read(spec, "limit_slope", "position_motor_share"),
+                "anti_windup": _variants(self.name, "anti_windup")[int(spec.modes[MODE_SLOTS["saturation"]])]}
 
     def set_arrays(self, p, ep, modes):
-        ep[10] = p["limit"]
-        ep[13] = p.get("limit_slope", 0.0)
-        ep[12] = p.get("position_motor_share", ep[12])
-        modes[5] = _variants(self.name, "anti_windup").index(bool(p.get("anti_windup", True)))
+        ep[EP_INDEX["limit"]] = p["limit"]
+        ep[EP_INDEX["limit_slope"]] = p.get("limit_slope", 0.0)
+        ep[EP_INDEX["position_motor_share"]] = p.get("position_motor_share", ep[EP_INDEX["position_motor_share"]])
+        modes[MODE_SLOTS["saturation"]] = _variants(self.name, "anti_windup").index(bool(p.get("anti_windup", True)))
 
     def words(self, p, intervals=None, unresolved=None):
         # the limit of the control-equivalent acceleration, not of an amplifier's volts
