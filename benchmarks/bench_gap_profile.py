@@ -24,7 +24,6 @@ diagnosis is tuned on).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -32,6 +31,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from benchmarks._zoo_search import zoo_cases  # noqa: E402
 
 
 def profile(zoo: Path, case: dict, ratios: list[float], variants: list[int], iters: int, slow: float,
@@ -42,7 +43,7 @@ def profile(zoo: Path, case: dict, ratios: list[float], variants: list[int], ite
     from ident.diagnosis.config import DEFAULT as cfg
     from ident.diagnosis.spec import simulate_spec, sse
 
-    fit, base, full = zoo_search(zoo, case, "backlash", cfg)
+    fit, base, full, _held = zoo_search(zoo, case, "backlash", cfg)
     x, Ts = full.x, full.Ts
     slot, i_g = MODE_SLOTS["backlash"], EP_INDEX["gap_mm"]
     i_mu, i_psi = EP_INDEX["motor_fraction"], EP_INDEX["position_motor_share"]
@@ -92,11 +93,7 @@ def main() -> None:
     ap.add_argument("--hold-psi", action="store_true", help="hold ψ at the search's reading (as the search does)")
     args = ap.parse_args()
     zoo = Path(args.zoo)
-    if not (zoo / "labels.json").exists():
-        sys.exit(f"error: {zoo / 'labels.json'} not found")
-    cases = [c for c in json.loads((zoo / "labels.json").read_text())["cases"] if c["effect"] == "backlash"]
-    if args.cases:
-        cases = [c for c in cases if c["case"] in set(args.cases.split(","))]
+    cases = zoo_cases(zoo, "backlash", args.cases)
     ratios = [float(v) for v in args.ratios.split(",")]
     variants = [int(v) for v in args.variants.split(",")]
     for c in cases:

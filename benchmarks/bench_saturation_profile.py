@@ -17,7 +17,6 @@ figure (the zoo the diagnosis is tuned on).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -26,24 +25,18 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks._zoo_search import zoo_cases  # noqa: E402
+
 
 def profile(zoo: Path, case: dict, slopes: list[float]) -> list[str]:
-    import ident
-    from ident.diagnosis.augmented import EP_INDEX, segment_starts, simulate_augmented
-    from ident.diagnosis.candidates import base_variants, fit_spec
+    from benchmarks._zoo_search import zoo_base
+    from ident.diagnosis.augmented import EP_INDEX, simulate_augmented
+    from ident.diagnosis.candidates import fit_spec
     from ident.diagnosis.config import DEFAULT as cfg
-    from ident.diagnosis.diagnose import _theta, fit_base
-    from ident.diagnosis.spec import ModelSpec, make_chunk, sse
+    from ident.diagnosis.spec import sse
 
-    rec, val = ident.load(zoo / case["recording"]), ident.load(zoo / case["validation"])
-    res = ident.identify(rec, diagnose=False)
-    ax, vax = next(iter(rec.axes.values())), next(iter(val.axes.values()))
-    ref = ax.actual[0]  # positions from the first sample, both recordings in one frame
-    Ts = rec.sample_period
-    full = make_chunk(ax.commanded - ref, ax.actual - ref, Ts, segment_starts(ax.commanded.size, rec.segment))
-    test = make_chunk(vax.commanded - ref, vax.actual - ref, Ts, segment_starts(vax.commanded.size, val.segment))
-    base = fit_base(ModelSpec(_theta(next(iter(res.axes.values())).model)), full, cfg=cfg)
-    base = base_variants(base, full, cfg=cfg)[0]
+    base, _other, full, test = zoo_base(zoo, case, cfg)
+    Ts = full.Ts
     u = np.empty(full.n)
     simulate_augmented(full.x_r, full.x, Ts, base.theta, flags=base.flags(), ep=base.ep, modes=base.modes,
                        starts=full.starts, derivs=full.derivs, u_out=u, warm=full.warm)
@@ -71,11 +64,7 @@ def main() -> None:
     ap.add_argument("--slopes", default="0,1,2,3,4,6")
     args = ap.parse_args()
     zoo = Path(args.zoo)
-    if not (zoo / "labels.json").exists():
-        sys.exit(f"error: {zoo / 'labels.json'} not found")
-    cases = [c for c in json.loads((zoo / "labels.json").read_text())["cases"] if c["effect"] == "saturation"]
-    if args.cases:
-        cases = [c for c in cases if c["case"] in set(args.cases.split(","))]
+    cases = zoo_cases(zoo, "saturation", args.cases)
     try:
         slopes = [float(v) for v in args.slopes.split(",")]
     except ValueError:

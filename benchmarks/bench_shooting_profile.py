@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from benchmarks._zoo_search import zoo_cases  # noqa: E402
 
 
 def profile(zoo: Path, case: dict, window: float, dampings: list[float]) -> list[str]:
@@ -34,7 +35,7 @@ def profile(zoo: Path, case: dict, window: float, dampings: list[float]) -> list
     from ident.diagnosis.spec import sse
 
     cfg = dataclasses.replace(DEFAULT, shooting_window_s=window)
-    fit, _base, full = zoo_search(zoo, case, "resonance", cfg)
+    fit, _base, full, _held = zoo_search(zoo, case, "resonance", cfg)
     shots = full.shots(window, cfg.shooting_lead_s)
     c_shot, c_free = sse(fit, shots), sse(fit, full)
     i_f, i_z, i_mu = EP_INDEX["freq_hz"], EP_INDEX["damping"], EP_INDEX["motor_fraction"]
@@ -60,11 +61,7 @@ def main() -> None:
     ap.add_argument("--damping", default="0.02,0.05,0.1,0.15")
     args = ap.parse_args()
     zoo = Path(args.zoo)
-    if not (zoo / "labels.json").exists():
-        sys.exit(f"error: {zoo / 'labels.json'} not found")
-    cases = [c for c in json.loads((zoo / "labels.json").read_text())["cases"] if c["effect"] == "resonance"]
-    if args.cases:
-        cases = [c for c in cases if c["case"] in set(args.cases.split(","))]
+    cases = zoo_cases(zoo, "resonance", args.cases)
     for c in cases:
         print("\n".join(profile(zoo, c, args.window, [float(v) for v in args.damping.split(",")])), flush=True)
 

@@ -23,7 +23,6 @@ A DEVELOPMENT figure (the zoo the diagnosis is tuned on).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -32,28 +31,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from benchmarks._zoo_search import zoo_cases  # noqa: E402
+
 
 def profile(zoo: Path, case: dict) -> list[str]:
-    import ident
-    from ident.diagnosis.augmented import EP_INDEX, segment_starts
-    from ident.diagnosis.candidates import base_variants, search
+    from benchmarks._zoo_search import zoo_search
+    from ident.diagnosis.augmented import EP_INDEX
     from ident.diagnosis.config import DEFAULT as cfg
-    from ident.diagnosis.diagnose import _theta, fit_base
-    from ident.diagnosis.residuals import localise
-    from ident.diagnosis.spec import ModelSpec, make_chunk, rest_residual, simulate_spec
+    from ident.diagnosis.spec import ModelSpec, rest_residual, simulate_spec
 
-    rec, val = ident.load(zoo / case["recording"]), ident.load(zoo / case["validation"])
-    res = ident.identify(rec, diagnose=False)
-    ax, vax = next(iter(rec.axes.values())), next(iter(val.axes.values()))
-    ref = ax.actual[0]  # both recordings in one frame, as identify gives them to the diagnosis
-    Ts = rec.sample_period
-    full = make_chunk(ax.commanded - ref, ax.actual - ref, Ts, segment_starts(ax.commanded.size, rec.segment))
-    held = make_chunk(vax.commanded - ref, vax.actual - ref, Ts, segment_starts(vax.commanded.size, val.segment))
+    fit, base, full, held = zoo_search(zoo, case, "stribeck", cfg)
     rests = held.rests(cfg.rest_restart_s)
-    base = fit_base(ModelSpec(_theta(next(iter(res.axes.values())).model)), full, cfg=cfg)
-    base, other = base_variants(base, full, cfg=cfg)[:2]
-    loc = localise(simulate_spec(base, full) - full.x, full.x_r, full.x, *full.derivs, Ts, full.starts)
-    fit = search(base, "stribeck", full, loc, cfg, others=(other,))
 
     def free(s: ModelSpec, ch) -> np.ndarray:
         return (simulate_spec(s, ch) - ch.x)[ch.score]
@@ -96,12 +84,7 @@ def main() -> None:
     ap.add_argument("--cases", default="", help="comma-separated; default every Stribeck case")
     args = ap.parse_args()
     zoo = Path(args.zoo)
-    if not (zoo / "labels.json").exists():
-        sys.exit(f"error: {zoo / 'labels.json'} not found")
-    cases = [c for c in json.loads((zoo / "labels.json").read_text())["cases"] if c["effect"] == "stribeck"]
-    if args.cases:
-        wanted = set(args.cases.split(","))
-        cases = [c for c in cases if c["case"] in wanted]
+    cases = zoo_cases(zoo, "stribeck", args.cases)
     for c in cases:
         print("\n".join(profile(zoo, c)), flush=True)
 
