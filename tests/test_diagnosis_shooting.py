@@ -13,10 +13,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from ident.diagnosis.augmented import EP_INDEX
+from ident.diagnosis.augmented import EP_INDEX, N_EP
 from ident.diagnosis.candidates import shoot
 from ident.diagnosis.config import DEFAULT
-from ident.diagnosis.spec import residual, simulate_spec, sse
+from ident.diagnosis.spec import (estimated_states, residual, residual_jacobian, restart_responses, simulate_spec,
+                                  sse)
 from test_diagnosis_windows import DRIVES, Ts, recorded, x_r  # noqa: F401  (x_r: the fixture)
 
 # a lightly damped two-mass mode, the loop closed on the motor: the restart holds the
@@ -65,6 +66,35 @@ def test_the_state_a_restart_misreads_is_estimated_per_window(x_r, drive):  # no
     # the race's windows keep the restart as it is (no state estimated)
     win = chunk.windows(4.0)
     assert np.array_equal(residual(spec, win), (win.w * (simulate_spec(spec, win) - win.x))[win.score])
+
+
+@pytest.mark.parametrize("drive", ["Stribeck friction", "lightly damped mode on the recorded position"])
+def test_the_exact_jacobian_of_the_windows_is_the_slope_of_their_residual(x_r, drive):  # noqa: F811
+    # with the window states eliminated by the projection the fit holds (restart responses of its start)
+    chunk, truth = recorded(x_r, *DRIVES_SHOT[drive])
+    spec = truth.copy()
+    spec.theta = truth.theta * np.array([1.05, 0.95, 1.05, 1.0, 1.02, 0.95, 0.9, 0.9])
+    shot = chunk.shots(0.3)
+    restarts = restart_responses(spec, shot)
+    m = shot.score
+
+    def resid(s):
+        r = shot.w[m] * (simulate_spec(s, shot)[m] - shot.x[m])
+        return estimated_states(r, s.effects, s.ep, s.modes, shot, restarts)
+
+    d_th = np.diag(spec.theta)[[0, 1, 6]]  # a1, a2, d0: per unit of their values
+    d_ep = np.zeros((3, N_EP))
+    G = residual_jacobian(spec, shot, d_th, d_ep, restarts=restarts)
+    for g, d in zip(G, d_th):
+        h = 1e-5
+        up, down = spec.copy(), spec.copy()
+        up.theta = spec.theta + h * d
+        down.theta = spec.theta - h * d
+        fd = (resid(up) - resid(down)) / (2 * h)
+        assert np.linalg.norm(g - fd) < 1e-3 * np.linalg.norm(fd)
+    # without the projection the slope is another: the window states move with the parameters
+    raw = residual_jacobian(spec, shot, d_th, d_ep)
+    assert np.linalg.norm(raw[0] - G[0]) > 0.01 * np.linalg.norm(G[0])
 
 
 def test_a_multiple_shooting_fit_finds_the_stribeck_curve_of_the_drive_that_recorded_it(x_r):  # noqa: F811

@@ -93,6 +93,7 @@ def test_a_fit_with_the_exact_jacobian_gets_where_differences_get(monkeypatch):
     import ident.diagnosis.candidates as cand
     from dataclasses import replace
 
+    import ident.diagnosis.spec as spec_module
     from ident.diagnosis.config import DEFAULT
     from ident.diagnosis.spec import make_chunk, sse
 
@@ -105,7 +106,7 @@ def test_a_fit_with_the_exact_jacobian_gets_where_differences_get(monkeypatch):
     start.ep[cand.EP_INDEX["delay_s"]] = 0.0018
     with monkeypatch.context() as mp:
         calls = []
-        mp.setattr(cand, "sensitivities", lambda *a, **k: calls.append(1) or sensitivities(*a, **k))
+        mp.setattr(spec_module, "sensitivities", lambda *a, **k: calls.append(1) or sensitivities(*a, **k))
         mp.setattr(cand, "simulate_augmented_many", lambda *a, **k: pytest.fail("a difference was taken"))
         exact = cand.fit_spec(start, chunk, max_iter=30, cfg=replace(DEFAULT, exact_fine=True))
         assert calls
@@ -136,11 +137,12 @@ def test_with_exact_jacobians_asked_for_a_rippled_model_still_takes_differences(
     from dataclasses import replace
 
     import ident.diagnosis.candidates as cand
+    import ident.diagnosis.spec as spec_module
     from ident.diagnosis.config import DEFAULT
 
     chunk = _chunk()[0]
     spec = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
-    monkeypatch.setattr(cand, "sensitivities", lambda *a, **k: pytest.fail("an exact Jacobian was taken"))
+    monkeypatch.setattr(spec_module, "sensitivities", lambda *a, **k: pytest.fail("an exact Jacobian was taken"))
     cand.fit_spec(spec, chunk, max_iter=2, cfg=replace(DEFAULT, exact_fine=True, exact_rough=True))
 
 

@@ -40,12 +40,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ident.diagnosis.augmented import (EP_INDEX, MODE_SLOTS, N_EP, sensitivities, simulate_augmented,
-                                       simulate_augmented_many)
+from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS, N_EP, simulate_augmented, simulate_augmented_many
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, cascade_motor_share, effect_parameters
-from ident.diagnosis.spec import (Chunk, ModelSpec, estimated_states, make_chunk, residual, restart_responses,
-                                  sim_substeps, simulate_spec, sse)
+from ident.diagnosis.spec import (Chunk, ModelSpec, estimated_states, make_chunk, residual, residual_jacobian,
+                                  restart_responses, sim_substeps, simulate_spec, sse)
 from ident.least_squares import bounded_lm, secant_lm
 
 if TYPE_CHECKING:
@@ -165,7 +164,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
     # multiple-shooting windows: the restart states are estimated per window along the
     # responses of the start's model (held through the fit: they barely move with it)
-    cols = restart_responses(spec, chunk)
+    restarts = restart_responses(spec, chunk)
 
     def weighted(y: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
@@ -178,7 +177,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         th, ep = unpack(z)
         r = weighted(simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
                                         starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm))
-        return estimated_states(r, spec.effects, ep, spec.modes, chunk, cols)
+        return estimated_states(r, spec.effects, ep, spec.modes, chunk, restarts)
 
     def resid_many(Z: np.ndarray) -> np.ndarray:  # row p is resid(Z[p]), bit for bit
         sets = [unpack(z) for z in Z]
@@ -190,25 +189,22 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
             for r, (_, ep) in zip(R, sets):
                 if not np.isfinite(r @ r):
                     r[:] = 1e3
-                r[:] = estimated_states(r, spec.effects, ep, spec.modes, chunk, cols)
+                r[:] = estimated_states(r, spec.effects, ep, spec.modes, chunk, restarts)
         return R
 
-    def jac(z: np.ndarray, cols: list[int]) -> np.ndarray:  # ∂resid/∂z_j for j in cols, exact
+    def jac(z: np.ndarray, which: list[int]) -> np.ndarray:  # ∂resid/∂z_j for j in which, exact
         th, ep = unpack(z)
-        d_th, d_ep = np.zeros((len(cols), 8)), np.zeros((len(cols), N_EP))
-        for i, j in enumerate(cols):  # unpack's linear map, column j
+        d_th, d_ep = np.zeros((len(which), 8)), np.zeros((len(which), N_EP))
+        for i, j in enumerate(which):  # unpack's linear map, column j
             if j < nb:
                 d_th[i, j] = s_th[j]
                 if beta and j == 1:
                     d_th[i, 5] = s_th[1]  # b2 = β + a2
             else:
                 d_ep[i, idx[j - nb]] = s_ep[j - nb]
-        D = sensitivities(chunk.x_r, chunk.x, chunk.Ts, th, ep, d_th, d_ep, flags=flags, modes=spec.modes,
-                          starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
-        with np.errstate(all="ignore"):
-            G = w * D[:, sel]
-        G[~np.isfinite(G).all(axis=1)] = 0.0  # a diverged simulation: resid() is a constant there
-        return G
+        moved = spec.copy()
+        moved.theta, moved.ep = th, ep
+        return residual_jacobian(moved, chunk, d_th, d_ep, restarts=restarts, nsub=nsub)
 
     # a parameter with a step of its effect's own (a gap: contact instants on sub-step
     # boundaries ripple its cost) keeps its difference, read through the ripple on purpose
@@ -216,8 +212,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     rough = rippled(spec)
 
     def how(h: float) -> dict:  # the Jacobian of a fit at difference step h
-        # (exact columns are the free run's: not with the shooting windows' estimated states)
-        exact = (cfg.exact_fine if h <= cfg.fd_step else cfg.exact_rough) and not rough and cols is None
+        exact = (cfg.exact_fine if h <= cfg.fd_step else cfg.exact_rough) and not rough
         # the columns simulated together, in two threads (the kernel runs outside the GIL;
         # ident.least_squares._jacobian): the same result, sooner
         return dict(parallel=True, resid_many=resid_many, step=steps(h), jac=jac if exact else None, jac_skip=own_step)

@@ -19,10 +19,11 @@ from ident.diagnosis.augmented import (
     N_MODES,
     command_derivatives,
     model_substeps,
+    sensitivities,
     simulate_augmented,
 )
 
-__all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "sim_substeps"]
+__all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "residual_jacobian", "sse", "sim_substeps"]
 
 
 @dataclass
@@ -401,6 +402,31 @@ def residual(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None, *,
     r = chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m])
     effects = () if shared_states else spec.effects
     return estimated_states(r, effects, spec.ep, spec.modes, chunk, restart_responses(spec, chunk, m), m)
+
+
+def residual_jacobian(spec: ModelSpec, chunk: Chunk, d_theta: np.ndarray, d_ep: np.ndarray, *,
+                      restarts: list[np.ndarray] | None = None, nsub: int | None = None) -> np.ndarray:
+    """Exact derivatives of :func:`residual` (without ``shared_states``), (P, scored samples):
+    row p along the direction ``(d_theta[p], d_ep[p])`` of the parameters.
+
+    The complex-step sensitivities of the free run (:func:`~ident.diagnosis.augmented.sensitivities`),
+    weighted; on multiple-shooting windows projected as :func:`estimated_states` projects the
+    residual, with ``restarts`` (:func:`restart_responses`, of the model the fit started
+    from) held: the window states are eliminated by a projection linear in the residual,
+    its basis held over the step (Kaufman's variable projection).  A row whose simulation
+    diverges is zero: the residual is a constant there.
+    """
+    m = chunk.score
+    D = sensitivities(chunk.x_r, chunk.x, chunk.Ts, spec.theta, spec.ep, d_theta, d_ep, flags=spec.flags(),
+                      modes=spec.modes, starts=chunk.starts, derivs=chunk.derivs,
+                      nsub=sim_substeps(spec, chunk.Ts) if nsub is None else nsub, warm=chunk.warm)
+    with np.errstate(all="ignore"):
+        G = chunk.w[m] * D[:, m]
+    G[~np.isfinite(G).all(axis=1)] = 0.0
+    if restarts is not None:
+        for g in G:
+            g[:] = estimated_states(g, spec.effects, spec.ep, spec.modes, chunk, restarts)
+    return G
 
 
 def rest_residual(spec: ModelSpec, chunk: Chunk, grid: int, span: float = 1.0) -> np.ndarray:
