@@ -97,13 +97,15 @@ def test_the_exact_jacobian_of_the_windows_is_the_slope_of_their_residual(x_r, d
     assert np.linalg.norm(raw[0] - G[0]) > 0.01 * np.linalg.norm(G[0])
 
 
-def test_a_multiple_shooting_fit_finds_the_stribeck_curve_of_the_drive_that_recorded_it(x_r):  # noqa: F811
+@pytest.mark.parametrize("jacobian", ["differences", "exact, log coordinates"])
+def test_a_multiple_shooting_fit_finds_the_stribeck_curve_of_the_drive_that_recorded_it(x_r, jacobian):  # noqa: F811
     chunk, truth = recorded(x_r, *DRIVES["Stribeck friction"])
     start = truth.copy()
     start.ep[EP_INDEX["static_to_coulomb_ratio"]] = 1.4
     start.ep[EP_INDEX["stribeck_velocity_mm_s"]] = 4.0
     start.theta = truth.theta * np.array([1.1, 0.9, 1.1, 1.0, 1.05, 0.9, 0.8, 0.8])
-    on = dataclasses.replace(DEFAULT, shooting_window_s=0.3)
+    exact = jacobian != "differences"
+    on = dataclasses.replace(DEFAULT, shooting_window_s=0.3, exact_fine=exact, exact_rough=exact, fit_log=exact)
     fit = shoot(start, chunk, on)
     p = fit.ep[[EP_INDEX["static_to_coulomb_ratio"], EP_INDEX["stribeck_velocity_mm_s"]]]
     assert np.allclose(p, [2.0, 2.0], rtol=0.05)

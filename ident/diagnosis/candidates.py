@@ -118,6 +118,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         s_th[5] = max(abs(th0[5]), 1e-4 * a2)
     ep0 = spec.ep.astype(float)
     s_ep = []
+    logs = []
     lo, hi = [], []
     for p, i, eff in zip(names, idx, own):
         b = eff.bounds(p, ep0[i], chunk, cfg)
@@ -129,12 +130,20 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         if p.startswith("amplitude"):
             s = max(abs(ep0[EP_INDEX["amplitude_sin"]]), abs(ep0[EP_INDEX["amplitude_cos"]]), floor)
         s_ep.append(s)
-        lo.append(b[0] / s)
-        hi.append(b[1] / s)
         ep0[i] = min(max(ep0[i], b[0]), b[1])
+        # a parameter whose box lies above zero (a frequency, a damping, a gap, a dead time,
+        # a limit, a Stribeck velocity) fitted by its logarithm (cfg.fit_log): a step moves
+        # it by a factor, and a Gauss–Newton step cannot leap to the floor of its box, where
+        # the effect vanishes and the cost is flat (a Stribeck curve of zero width)
+        logs.append(cfg.fit_log and b[0] > 0.0)
+        lo.append(math.log(b[0] / s) if logs[-1] else b[0] / s)
+        hi.append(math.log(b[1] / s) if logs[-1] else b[1] / s)
     s_ep = np.array(s_ep)
     nb = 8 if fit_base else 0
-    z0 = np.concatenate([th0[:nb] / s_th[:nb], ep0[idx] / s_ep if idx else []])
+    logs = np.array(logs, dtype=bool)
+    ze = ep0[idx] / s_ep if idx else np.zeros(0)
+    ze[logs] = np.log(ze[logs])
+    z0 = np.concatenate([th0[:nb] / s_th[:nb], ze])
     lb = np.concatenate([np.full(nb, -np.inf), lo]) if idx else np.full(nb, -np.inf)
     ub = np.concatenate([np.full(nb, np.inf), hi]) if idx else np.full(nb, np.inf)
     if z0.size == 0:
@@ -159,7 +168,9 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
                 th[5] += th[1]
         ep = ep0.copy()
         if idx:
-            ep[idx] = z[nb:] * s_ep
+            ze = z[nb:].copy()
+            ze[logs] = np.exp(ze[logs])
+            ep[idx] = ze * s_ep
         return th, ep
 
     # multiple-shooting windows: the restart states are estimated per window along the
@@ -201,7 +212,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
                 if beta and j == 1:
                     d_th[i, 5] = s_th[1]  # b2 = β + a2
             else:
-                d_ep[i, idx[j - nb]] = s_ep[j - nb]
+                d_ep[i, idx[j - nb]] = s_ep[j - nb] * (math.exp(z[j]) if logs[j - nb] else 1.0)
         moved = spec.copy()
         moved.theta, moved.ep = th, ep
         return residual_jacobian(moved, chunk, d_th, d_ep, restarts=restarts, nsub=nsub)

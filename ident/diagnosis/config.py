@@ -239,6 +239,12 @@ class DiagnosisConfig:
     #: 16/21 and 18/22 of the hits).
     exact_fine: bool = False
     exact_rough: bool = False
+    #: Fit an effect's parameters whose box lies above zero by their logarithm (a step
+    #: changes them by a factor).  Linear coordinates let the first Gauss–Newton step of an
+    #: exact Jacobian leap to the floor of a box where the effect vanishes and the cost is
+    #: flat: tests/test_diagnosis_shooting.py's Stribeck start reaches v_s = 1e-4 mm/s there
+    #: and stops, in log coordinates it finds the curve.
+    fit_log: bool = False
     #: Fit β = b2 − a2 in place of b2 (eq. 3.3's position gains): b2·x_r − a2·x becomes
     #: a2·(x_r − x) + β·x_r, so a step on a2 moves u by a2's share of the tracking error,
     #: not of the position (~100 mm): b2 and a2 nearly cancel and a fit on them crawls
