@@ -671,8 +671,8 @@ def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, w
     out_u = np.empty((y.shape[0], n) if u_out is not None else (0, 0), dtype=dtype)
     if y.shape[0]:
         _kernel_many(x_r, np.ascontiguousarray(derivs[0], dtype=float), np.ascontiguousarray(derivs[1], dtype=float),
-                     np.ascontiguousarray(x0, dtype=float), np.ascontiguousarray(starts, dtype=np.bool_),
-                     *_warm_arrays(warm, n), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]),
+                     np.ascontiguousarray(x0, dtype=dtype), np.ascontiguousarray(starts, dtype=np.bool_),
+                     *_warm_arrays(warm, n, dtype), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]),
                      np.ascontiguousarray(flags, dtype=np.int64), np.ascontiguousarray(E[ok]), _padded_modes(modes),
                      y, out_u, np.zeros(n) if load is None else np.ascontiguousarray(load, dtype=float),
                      int(start_rule))
@@ -685,11 +685,13 @@ def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, w
     return out
 
 
-def _warm_arrays(warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
-                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The kernel's (mask, v, a) of warm restarts: none when ``warm`` is None (v, a never read then)."""
+def _warm_arrays(warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None, n: int,
+                 dtype=float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kernel's (mask, v, a) of warm restarts, v and a of the run's number type (a
+    complex run differentiates the restart state too): none when ``warm`` is None (v, a
+    never read then)."""
     if warm is None:
-        unused = np.zeros(n)
+        unused = np.zeros(n, dtype=dtype)
         return np.zeros(n, dtype=np.bool_), unused, unused
-    return (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=float),
-            np.ascontiguousarray(warm[2], dtype=float))
+    return (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=dtype),
+            np.ascontiguousarray(warm[2], dtype=dtype))

@@ -109,6 +109,7 @@ from ident.kernel import (  # noqa: F401  (re-exported: the kernel's layout is t
     EP_INDEX, MODE_SLOTS, N_EP, N_MODES, _many, _padded_modes, _runnable)
 
 __all__ = [
+    "restart_sensitivities",
     "EFFECTS",
     "EP_INDEX",
     "N_EP",
@@ -339,3 +340,34 @@ def sensitivities(
     TH = th + 1j * COMPLEX_STEP * np.asarray(d_theta, dtype=float).reshape(-1, 8)
     E = e + 1j * COMPLEX_STEP * np.asarray(d_ep, dtype=float).reshape(-1, N_EP)
     return _many(x_r, x0, Ts, TH, E, complex, flags, modes, starts, derivs, nsub, warm).imag / COMPLEX_STEP
+
+
+def restart_sensitivities(
+    x_r: np.ndarray,
+    x0: np.ndarray,
+    Ts: float,
+    theta: np.ndarray,
+    ep: np.ndarray,
+    *,
+    flags: np.ndarray,
+    modes: np.ndarray,
+    starts: np.ndarray,
+    derivs: tuple[np.ndarray, np.ndarray],
+    nsub: int,
+    warm: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> np.ndarray:
+    """Exact derivatives of the free run to the state every warm restart reads, (3, N):
+    ∂x̂/∂ of an offset added at every warm start (``warm[0]``) to the recorded position (mm),
+    velocity (mm/s) and acceleration (mm/s²) the restart takes.
+
+    The complex-step derivative as :func:`sensitivities`, the offset the imaginary part of
+    the restart's state: the directions a multiple-shooting window's error takes when its
+    restart misreads the state.
+    """
+    on, v, a = (np.asarray(w) for w in warm)
+    th = np.asarray(theta, dtype=float).reshape(1, 8).astype(complex)
+    e = np.asarray(ep, dtype=float).reshape(1, N_EP).astype(complex)
+    step = 1j * COMPLEX_STEP * on
+    runs = ((x0 + step, (on, v, a)), (x0, (on, v + step, a)), (x0, (on, v, a + step)))
+    return np.stack([_many(x_r, x, Ts, th, e, complex, flags, modes, starts, derivs, nsub, w)[0].imag
+                     for x, w in runs]) / COMPLEX_STEP

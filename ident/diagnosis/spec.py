@@ -19,6 +19,7 @@ from ident.diagnosis.augmented import (
     N_MODES,
     command_derivatives,
     model_substeps,
+    restart_sensitivities,
     sensitivities,
     simulate_augmented,
 )
@@ -467,31 +468,21 @@ def rest_residual(spec: ModelSpec, chunk: Chunk, grid: int, span: float = 1.0) -
     return out
 
 
-#: Offsets of a restart's position (mm), velocity (mm/s) and acceleration (mm/s²) whose
-#: responses :func:`restart_responses` differences: small against what a drive moves, large
-#: against rounding.
-_RESTART_STEPS = (1e-4, 1e-2, 1.0)
-
-
 def restart_responses(spec: ModelSpec, chunk: Chunk, m: np.ndarray | None = None) -> list[np.ndarray] | None:
     """The weighted responses of ``spec``'s simulation on ``chunk``'s samples ``m`` (default
     the scored ones) to an offset of every warm restart's position, velocity and
-    acceleration (per unit of ``_RESTART_STEPS``, forward differences): the directions a
-    window's error takes when the restart misreads the state — the position, the velocity,
-    the integral holding the acceleration.  None unless ``chunk`` estimates its restart
-    states (:meth:`Chunk.shots`).
+    acceleration (per mm, mm/s and mm/s², exact: :func:`~ident.diagnosis.augmented.restart_sensitivities`):
+    the directions a window's error takes when the restart misreads the state — the
+    position, the velocity, the integral holding the acceleration.  None unless ``chunk``
+    estimates its restart states (:meth:`Chunk.shots`).
     """
     if not chunk.estimate_states or chunk.warm is None:
         return None
     m = chunk.score if m is None else m
-    on, v, a = chunk.warm
-    y = simulate_spec(spec, chunk)
-    cols = []
-    for i, h in enumerate(_RESTART_STEPS):
-        moved = replace(chunk, x=chunk.x + h * on) if i == 0 else replace(
-            chunk, warm=(on, v + h * on, a) if i == 1 else (on, v, a + h * on))
-        cols.append(chunk.w[m] * (simulate_spec(spec, moved)[m] - y[m]))
-    return cols
+    D = restart_sensitivities(chunk.x_r, chunk.x, chunk.Ts, spec.theta, spec.ep, flags=spec.flags(),
+                              modes=spec.modes, starts=chunk.starts, derivs=chunk.derivs,
+                              nsub=sim_substeps(spec, chunk.Ts), warm=chunk.warm)
+    return [chunk.w[m] * d[m] for d in D]
 
 
 def estimated_states(r: np.ndarray, effects: tuple[str, ...], ep: np.ndarray, modes: np.ndarray, chunk: Chunk,
