@@ -3,8 +3,9 @@ slope (complex-step sensitivities) is the slope of its trend.
 
 For each model of the augmented simulator (eq. 3.3 plus one effect, continuous and sampled
 controller) a noisy recording is simulated from it, the base θ is moved 2 % off, and the
-weighted cost is evaluated on 41 points across ±0.5 % of a1, b1 and d0.  Printed per
-parameter: the ripple (standard deviation of the cost about its quadratic trend, relative to
+weighted cost is evaluated on 41 points across ±0.5 % of a1, b1 and d0, then of each of the
+effect's own parameters (a second table; the effect's parameters stay at their true values
+while the base is off).  Printed per parameter: the ripple (standard deviation of the cost about its quadratic trend, relative to
 the cost) and the exact slope over the trend's slope at the centre (1: the exact slope is
 the trend's).  This is what :func:`ident.diagnosis.candidates.rippled` rests on: a fit of a
 model whose exact slope is not the trend's reads the trend by differences.
@@ -22,7 +23,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ident.diagnosis.augmented import N_EP, segment_starts, sensitivities  # noqa: E402
+from ident.diagnosis.augmented import EP_INDEX, N_EP, segment_starts, sensitivities  # noqa: E402
 from ident.diagnosis.spec import ModelSpec, make_chunk, sim_substeps, simulate_spec, sse  # noqa: E402
 from tests.test_diagnosis_units import point_to_point  # noqa: E402  (the unit tests' moves)
 
@@ -40,20 +41,27 @@ MODELS = {
 }
 
 
-def ripple(spec: ModelSpec, chunk, j: int, span: float = 0.005) -> tuple[float, float]:
-    """(ripple, exact slope / trend slope) of the cost along θ_j around ``spec``."""
-    base = spec.theta[j]
+#: θ's slots by name (the bench's base columns).
+THETA_INDEX = {"a1": 0, "b1": 4, "d0": 6}
+
+
+def ripple(spec: ModelSpec, chunk, name: str, span: float = 0.005) -> tuple[float, float]:
+    """(ripple, exact slope / trend slope) of the cost along the parameter ``name`` (a slot of
+    θ in :data:`THETA_INDEX` or an effect parameter of ``EP_INDEX``) around ``spec``."""
+    vec, j = (spec.theta, THETA_INDEX[name]) if name in THETA_INDEX else (spec.ep, EP_INDEX[name])
+    base = vec[j]
     u = np.linspace(-span, span, 41)
     c = []
     for du in u:
         s = spec.copy()
-        s.theta[j] = base * (1.0 + du)
+        (s.theta if vec is spec.theta else s.ep)[j] = base * (1.0 + du)
         c.append(sse(s, chunk))
     c = np.array(c)
     trend = np.polyfit(u, c, 2)
     d_th = np.zeros((1, 8))
-    d_th[0, j] = base
-    D = sensitivities(chunk.x_r, chunk.x, chunk.Ts, spec.theta, spec.ep, d_th, np.zeros((1, N_EP)),
+    d_ep = np.zeros((1, N_EP))
+    (d_th if vec is spec.theta else d_ep)[0, j] = base
+    D = sensitivities(chunk.x_r, chunk.x, chunk.Ts, spec.theta, spec.ep, d_th, d_ep,
                       flags=spec.flags(), modes=spec.modes, starts=chunk.starts, derivs=chunk.derivs,
                       nsub=sim_substeps(spec, chunk.Ts), warm=chunk.warm)[0]
     m = chunk.score
@@ -65,7 +73,8 @@ def ripple(spec: ModelSpec, chunk, j: int, span: float = 0.005) -> tuple[float, 
 def main() -> None:
     x_r = point_to_point(3)
     starts = segment_starts(x_r.size, None)
-    print(f"{'model':26s} ctrl  " + "  ".join(f"{n:>22s}" for n in ("a1", "b1", "d0")))
+    rows = []
+    print(f"{'model':26s} ctrl  " + "  ".join(f"{n:>22s}" for n in THETA_INDEX))
     for name, (effect, params, variant) in MODELS.items():
         for controller in (0, 1):
             true = ModelSpec(THETA.copy()) if effect is None else ModelSpec(THETA.copy()).with_effect(
@@ -76,9 +85,15 @@ def main() -> None:
             chunk = make_chunk(x_r, x, TS, starts)
             off = true.copy()
             off.theta = off.theta * 1.02
-            cells = [ripple(off, chunk, j) for j in (0, 4, 6)]
+            cells = [ripple(off, chunk, j) for j in THETA_INDEX]
             print(f"{name:26s} {controller:4d}  " + "  ".join(f"ripple {r:7.1e} slope {s:+6.2f}" for r, s in cells))
-
+            rows.append((name, controller, off, chunk, list(params)))
+    print(f"\n{'model':26s} ctrl  the effect's own parameters")
+    for name, controller, off, chunk, names in rows:
+        if names:
+            cells = [(p, *ripple(off, chunk, p)) for p in names]
+            print(f"{name:26s} {controller:4d}  " + "  ".join(
+                f"{p} ripple {r:7.1e} slope {s:+6.2f}" for p, r, s in cells))
 
 if __name__ == "__main__":
     main()

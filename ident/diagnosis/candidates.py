@@ -58,15 +58,14 @@ __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse
 
 def rippled(spec: ModelSpec) -> bool:
     """Whether ``spec``'s free-run cost ripples in its parameters on a scale finer than any
-    useful step: a two-mass backlash (the contact's force switches on at sub-step instants)
-    or a saturation (clip and integrator freeze switch there).  There the exact slope is
-    the slope of one ripple — up to 300 times the trend, or of the other sign
+    useful step: a saturation (clip and integrator freeze switch at sub-step instants).
+    There the exact slope is the slope of one ripple — up to 30 times the trend
     (benchmarks/bench_cost_ripple.py) — and a fit reads the trend by differences instead;
-    on the other models (Coulomb stick included: its switch instant is resolved inside the
-    sub-step) the exact slope is the trend's.
+    on the other models the exact slope is the trend's: a Coulomb stick's switch instant
+    and a two-mass backlash's contact instants are resolved inside the sub-step
+    (:func:`ident.kernel._contact_push`), so the free run is continuous in the parameters.
     """
-    two_mass_gap = "backlash" in spec.effects and spec.modes[MODE_SLOTS["backlash"]] >= 1
-    return two_mass_gap or "saturation" in spec.effects
+    return "saturation" in spec.effects
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
@@ -217,8 +216,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         moved.theta, moved.ep = th, ep
         return residual_jacobian(moved, chunk, d_th, d_ep, restarts=restarts, nsub=nsub)
 
-    # a parameter with a step of its effect's own (a gap: contact instants on sub-step
-    # boundaries ripple its cost) keeps its difference, read through the ripple on purpose
+    # a parameter with a step of its effect's own keeps its difference, read through a
+    # ripple on purpose
     own_step = [nb + i for i, (p, eff) in enumerate(zip(names, own)) if p in eff.fd_step]
     rough = rippled(spec)
 

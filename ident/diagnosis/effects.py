@@ -197,9 +197,6 @@ class Backlash(Effect):
     added = 2
     two_mass = True
     scale_floor = {"gap_mm": 1e-3, "position_motor_share": 0.1}
-    #: over the gap the cost is a parabola with ±20 % ripple at 0.1 % steps (contacts on
-    #: sub-step boundaries): with 0.1 % differences the gap never moves from its start
-    fd_step = {"gap_mm": 0.03}
     #: starting gaps, mm: a log grid over what feed drives show (1 µm … 1 mm)
     start_gaps_mm = (0.003, 0.01, 0.03, 0.1, 0.3)
 
