@@ -178,7 +178,9 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
     def weighted(y: np.ndarray) -> np.ndarray:
         with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
-            r = w * (y[sel] - x_m)
+            r = y[sel]  # in place: y is the simulation's own array, not read again
+            np.subtract(r, x_m, out=r)
+            np.multiply(w, r, out=r)
             if not np.isfinite(r @ r):  # a NaN, an inf or an overflow: a diverged simulation
                 return np.full(r.size, 1e3)
         return r
@@ -189,17 +191,33 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
                                         starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm))
         return estimated_states(r, spec.effects, ep, spec.modes, chunk, restarts)
 
+    def unpack_many(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # row p is unpack(Z[p]), bit for bit
+        TH = np.repeat(th0[None, :], len(Z), axis=0)
+        if nb:
+            TH[:] = Z[:, :8] * s_th
+            if beta:
+                TH[:, 5] += TH[:, 1]
+        EP = np.repeat(ep0[None, :], len(Z), axis=0)
+        if idx:
+            ZE = Z[:, nb:].copy()
+            ZE[:, logs] = np.exp(ZE[:, logs])
+            EP[:, idx] = ZE * s_ep
+        return TH, EP
+
     def resid_many(Z: np.ndarray) -> np.ndarray:  # row p is resid(Z[p]), bit for bit
-        sets = [unpack(z) for z in Z]
-        Y = simulate_augmented_many(chunk.x_r, chunk.x, chunk.Ts, np.array([t for t, _ in sets]),
-                                    np.array([e for _, e in sets]), flags=flags, modes=spec.modes,
+        TH, EP = unpack_many(Z)
+        Y = simulate_augmented_many(chunk.x_r, chunk.x, chunk.Ts, TH, EP, flags=flags, modes=spec.modes,
                                     starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
         with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
-            R = w * (Y[:, sel] - x_m)  # element by element as weighted() does
-            for r, (_, ep) in zip(R, sets):
+            # element by element as weighted() does, in place (Y is this call's own array)
+            R = Y[:, sel]  # a view (sel a slice) or a copy (an index array): Y is not read again
+            np.subtract(R, x_m, out=R)
+            np.multiply(w, R, out=R)
+            for r, ep in zip(R, EP):
                 if not np.isfinite(r @ r):
                     r[:] = 1e3
-                r[:] = estimated_states(r, spec.effects, ep, spec.modes, chunk, restarts)
+                if restarts is not None:  # estimated_states returns r itself otherwise
+                    r[:] = estimated_states(r, spec.effects, ep, spec.modes, chunk, restarts)
         return R
 
     def jac(z: np.ndarray, which: list[int]) -> np.ndarray:  # ∂resid/∂z_j for j in which, exact

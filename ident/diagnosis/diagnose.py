@@ -863,8 +863,10 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     def fit_one(eff: str, i: int, tr: Chunk) -> ModelSpec:
         return search(base_sc.specs[i], eff, tr, loc, cfg, others=(other,))
 
-    # the longest searches first (two-mass variants), so both threads end together
-    heavy_first = sorted(effects, key=lambda e: not EFFECT_MODELS[e].two_mass)
+    # the longest searches first, so both threads end together: a two-mass model's (more
+    # states and variants) and one raced on whole segments (not restartable: its race
+    # cannot take windows of the recording)
+    heavy_first = sorted(effects, key=lambda e: not (EFFECT_MODELS[e].two_mass or not EFFECT_MODELS[e].restartable))
     jobs = {(eff, i): pool.submit(fit_one, eff, i, tr) for eff in heavy_first for i, (tr, _te) in enumerate(folds)}
     say(f"fitting {len(effects)} effects")
     # while the workers search: the equivalent input disturbance of the base model, and

@@ -26,6 +26,8 @@ closed-loop model does not know: sizes are given in mm/s².
 
 from __future__ import annotations
 
+import bisect
+import heapq
 import math
 
 import numpy as np
@@ -173,22 +175,35 @@ def _step_blocks(y: np.ndarray, Ts: float, starts: np.ndarray) -> list[tuple[int
     n_eff = max(per_s * n * Ts, 2.0)
     pieces = [(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
 
+    terms: dict[tuple[int, int], float] = {}  # each piece's squared error about its level, once
+
     def rss(ps) -> float:
-        return float(sum((c2[b] - c2[a]) - (c1[b] - c1[a]) ** 2 / (b - a) for a, b in ps))
+        for a, b in ps:
+            if (a, b) not in terms:
+                terms[a, b] = (c2[b] - c2[a]) - (c1[b] - c1[a]) ** 2 / (b - a)
+        return float(sum([terms[p] for p in ps]))  # summed in the pieces' order, as ever
 
     gains = {p: _split_gain(c1, *p, m) for p in pieces}
+    # the piece to split next: the largest gain, ties to the earliest piece (starts are
+    # unique), popped from a heap instead of a scan of every piece at every split
+    heap = [(-gains[p][0], p[0], p) for p in pieces]
+    heapq.heapify(heap)
+    pieces.sort()
     path = [list(pieces)]
     k_max = int(n * Ts / (2.0 * BLOCK_MIN_S))
     for _ in range(k_max):
-        p = max(pieces, key=lambda q: (gains[q][0], -q[0]))  # ties: the earliest piece
+        if not heap:
+            break
+        p = heapq.heappop(heap)[2]
         g, k = gains[p]
         if k < 0 or g <= 0.0:
             break
         pieces.remove(p)
         for q in ((p[0], k), (k, p[1])):
-            pieces.append(q)
+            bisect.insort(pieces, q)
             gains[q] = _split_gain(c1, *q, m)
-        path.append(sorted(pieces))
+            heapq.heappush(heap, (-gains[q][0], q[0], q))
+        path.append(list(pieces))
     bic = [n_eff * math.log(max(rss(ps), 1e-300) / n) + 2.0 * j * math.log(n_eff) for j, ps in enumerate(path)]
     best = path[int(np.argmin(bic))]
     if len(best) == len(path[0]):

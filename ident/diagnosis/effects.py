@@ -98,6 +98,7 @@ class Effect:
     two_mass: bool = False
     #: the model's whole state can be read from the recording at a restart mid-move
     #: (:meth:`~ident.diagnosis.spec.Chunk.windows`): its search may race on windows
+    #: (one that races on whole segments is among the longest: started with the two-mass ones)
     restartable: bool = True
 
     def free(self, spec: ModelSpec) -> list[str]:
