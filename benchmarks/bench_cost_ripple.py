@@ -3,10 +3,11 @@ slope (complex-step sensitivities) is the slope of its trend.
 
 For each model of the augmented simulator (eq. 3.3 plus one effect, continuous and sampled
 controller) a noisy recording is simulated from it, the base θ is moved 2 % off, and the
-weighted cost is evaluated on 41 points across ±0.5 % of a1, b1 and d0.  Printed per
-parameter: the ripple (standard deviation of the cost about its quadratic trend, relative to
-the cost) and the exact slope over the trend's slope at the centre (1: the exact slope is
-the trend's).  This is what :func:`ident.diagnosis.candidates.rippled` rests on: a fit of a
+weighted cost is evaluated on 41 points across ±0.5 % of a1, b1 and d0; a second table does
+the same along the saturation's own parameters (limit and limit_slope, the base θ off as
+before), with and without anti-windup and with a ψ-share.  Printed per parameter: the ripple
+(standard deviation of the cost about its quadratic trend, relative to the cost) and the
+exact slope over the trend's slope at the centre (1: the exact slope is the trend's).  This is what :func:`ident.diagnosis.candidates.rippled` rests on: a fit of a
 model whose exact slope is not the trend's reads the trend by differences.
 
     python benchmarks/bench_cost_ripple.py
@@ -22,7 +23,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ident.diagnosis.augmented import N_EP, segment_starts, sensitivities  # noqa: E402
+from ident.diagnosis.augmented import EP_INDEX, N_EP, segment_starts, sensitivities  # noqa: E402
 from ident.diagnosis.spec import ModelSpec, make_chunk, sim_substeps, simulate_spec, sse  # noqa: E402
 from tests.test_diagnosis_units import point_to_point  # noqa: E402  (the unit tests' moves)
 
@@ -39,21 +40,32 @@ MODELS = {
     "time delay, in the loop": ("time_delay", {"delay_s": 0.0023}, 1),
 }
 
+#: The saturation along its own parameters: limit (mm/s²) and the slope of the limit with speed
+#: (1/s; started off 0, else its relative span is no span).
+SATURATIONS = {
+    "saturation, anti-windup": ({"limit": 3000.0, "limit_slope": 20.0}, 0),
+    "saturation, no anti-windup": ({"limit": 3000.0, "limit_slope": 20.0}, 1),
+    "saturation, psi 0.5": ({"limit": 3000.0, "limit_slope": 20.0, "position_motor_share": 0.5}, 0),
+}
 
-def ripple(spec: ModelSpec, chunk, j: int, span: float = 0.005) -> tuple[float, float]:
-    """(ripple, exact slope / trend slope) of the cost along θ_j around ``spec``."""
-    base = spec.theta[j]
+
+def ripple(spec: ModelSpec, chunk, j: int, span: float = 0.005, ep: bool = False) -> tuple[float, float]:
+    """(ripple, exact slope / trend slope) of the cost along θ_j (``ep``: the effect parameter j)
+    around ``spec``."""
+    vec = "ep" if ep else "theta"
+    base = getattr(spec, vec)[j]
     u = np.linspace(-span, span, 41)
     c = []
     for du in u:
         s = spec.copy()
-        s.theta[j] = base * (1.0 + du)
+        getattr(s, vec)[j] = base * (1.0 + du)
         c.append(sse(s, chunk))
     c = np.array(c)
     trend = np.polyfit(u, c, 2)
     d_th = np.zeros((1, 8))
-    d_th[0, j] = base
-    D = sensitivities(chunk.x_r, chunk.x, chunk.Ts, spec.theta, spec.ep, d_th, np.zeros((1, N_EP)),
+    d_ep = np.zeros((1, N_EP))
+    (d_ep if ep else d_th)[0, j] = base
+    D = sensitivities(chunk.x_r, chunk.x, chunk.Ts, spec.theta, spec.ep, d_th, d_ep,
                       flags=spec.flags(), modes=spec.modes, starts=chunk.starts, derivs=chunk.derivs,
                       nsub=sim_substeps(spec, chunk.Ts), warm=chunk.warm)[0]
     m = chunk.score
@@ -62,22 +74,41 @@ def ripple(spec: ModelSpec, chunk, j: int, span: float = 0.005) -> tuple[float, 
     return float(np.std(c - np.polyval(trend, u)) / c[len(u) // 2]), exact / trend[1]
 
 
-def main() -> None:
-    x_r = point_to_point(3)
-    starts = segment_starts(x_r.size, None)
-    print(f"{'model':26s} ctrl  " + "  ".join(f"{n:>22s}" for n in ("a1", "b1", "d0")))
-    for name, (effect, params, variant) in MODELS.items():
+def recorded(true: ModelSpec, x_r: np.ndarray, starts: np.ndarray):
+    """A noisy recording of ``true`` on the command ``x_r`` and the base θ of the model off by 2 %."""
+    x = simulate_spec(true, make_chunk(x_r, x_r, TS, starts))
+    x = x + np.random.default_rng(0).normal(0.0, 5e-5, x.size)
+    off = true.copy()
+    off.theta = off.theta * 1.02
+    return make_chunk(x_r, x, TS, starts), off
+
+
+def table(rows, names: tuple[str, ...], x_r: np.ndarray, starts: np.ndarray) -> None:
+    """Print the ripple and slope ratio along ``names`` (θ or effect parameters) for each
+    (row name, effect, its parameters, variant)."""
+    print(f"{'model':26s} ctrl  " + "  ".join(f"{n:>22s}" for n in names))
+    for name, effect, params, variant in rows:
         for controller in (0, 1):
             true = ModelSpec(THETA.copy()) if effect is None else ModelSpec(THETA.copy()).with_effect(
                 effect, params, variant)
             true.modes[4] = controller
-            x = simulate_spec(true, make_chunk(x_r, x_r, TS, starts))
-            x = x + np.random.default_rng(0).normal(0.0, 5e-5, x.size)
-            chunk = make_chunk(x_r, x, TS, starts)
-            off = true.copy()
-            off.theta = off.theta * 1.02
-            cells = [ripple(off, chunk, j) for j in (0, 4, 6)]
+            chunk, off = recorded(true, x_r, starts)
+            cells = [ripple(off, chunk, THETA_NAMES.index(n)) if n in THETA_NAMES
+                     else ripple(off, chunk, EP_INDEX[n], ep=True) for n in names]
             print(f"{name:26s} {controller:4d}  " + "  ".join(f"ripple {r:7.1e} slope {s:+6.2f}" for r, s in cells))
+
+
+#: θ's names, in eq. 3.3's order.
+THETA_NAMES = ("a1", "a2", "a3", "b0", "b1", "b2", "d0", "d1")
+
+
+def main() -> None:
+    x_r = point_to_point(3)
+    starts = segment_starts(x_r.size, None)
+    table([(n, *m) for n, m in MODELS.items()], ("a1", "b1", "d0"), x_r, starts)
+    print()
+    table([(n, "saturation", p, v) for n, (p, v) in SATURATIONS.items()], ("limit", "limit_slope", "a1"), x_r,
+          starts)
 
 
 if __name__ == "__main__":

@@ -121,12 +121,17 @@ def test_a_fit_with_the_exact_jacobian_gets_where_differences_get(monkeypatch):
 
 
 def test_a_model_whose_cost_ripples_is_fitted_by_differences():
-    """A two-mass backlash's contact switches on sub-step instants: its exact slope is a
-    ripple's (benchmarks/bench_cost_ripple.py), so its fit reads the trend by differences."""
+    """A two-mass backlash's contact switches on sub-step instants, a saturation on the sampled
+    controller at samples: their exact slope is a ripple's (benchmarks/bench_cost_ripple.py),
+    so their fit reads the trend by differences.  On the exact step (continuous controller)
+    the clip's instants are located inside the sub-step: the exact slope is the trend's."""
     from ident.diagnosis.candidates import rippled
 
     assert rippled(ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": 0.01, "motor_fraction": 0.7}, 1))
-    assert rippled(ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0))
+    sampled = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
+    sampled.modes[4] = 1
+    assert rippled(sampled)
+    assert not rippled(ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0))
     assert not rippled(ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": 0.01}, 0))
     assert not rippled(ModelSpec(THETA.copy()).with_effect("stribeck", {"static_to_coulomb_ratio": 2.0,
                                                                           "stribeck_velocity_mm_s": 1.0}))
@@ -140,6 +145,7 @@ def test_with_exact_jacobians_asked_for_a_rippled_model_still_takes_differences(
 
     chunk = _chunk()[0]
     spec = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
+    spec.modes[4] = 1  # the sampled controller: the clip switches at samples
     monkeypatch.setattr(cand, "sensitivities", lambda *a, **k: pytest.fail("an exact Jacobian was taken"))
     cand.fit_spec(spec, chunk, max_iter=2, cfg=replace(DEFAULT, exact_fine=True, exact_rough=True))
 

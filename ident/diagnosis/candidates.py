@@ -59,15 +59,23 @@ __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse
 
 def rippled(spec: ModelSpec) -> bool:
     """Whether ``spec``'s free-run cost ripples in its parameters on a scale finer than any
-    useful step: a two-mass backlash (the contact's force switches on at sub-step instants)
-    or a saturation (clip and integrator freeze switch there).  There the exact slope is
-    the slope of one ripple — up to 300 times the trend, or of the other sign
-    (benchmarks/bench_cost_ripple.py) — and a fit reads the trend by differences instead;
-    on the other models (Coulomb stick included: its switch instant is resolved inside the
-    sub-step) the exact slope is the trend's.
+    useful step: a two-mass backlash (the contact's force switches on at sub-step instants),
+    or a saturation off the kernel's exact step — on the sampled controller, a two-mass
+    model or behind a dead time in the loop, where clip and integrator freeze switch at
+    sub-step or sample instants.  There the exact slope is the slope of one ripple — up to
+    300 times the trend, or of the other sign (benchmarks/bench_cost_ripple.py) — and a fit
+    reads the trend by differences instead; on the other models the exact slope is the
+    trend's: Coulomb stick and the saturation on the exact step (single mass, continuous
+    controller) have their switch instants located inside the sub-step
+    (:func:`ident.kernel._free_phase`, :func:`ident.kernel._saturated_step`).
     """
-    two_mass_gap = "backlash" in spec.effects and spec.modes[MODE_SLOTS["backlash"]] >= 1
-    return two_mass_gap or "saturation" in spec.effects
+    modes = spec.modes
+    two_mass_gap = "backlash" in spec.effects and modes[MODE_SLOTS["backlash"]] >= 1
+    two_mass = two_mass_gap or ("resonance" in spec.effects and modes[MODE_SLOTS["resonance"]] >= 1)
+    delay_in_loop = "time_delay" in spec.effects and modes[MODE_SLOTS["time_delay"]] == 1
+    clip_switched = "saturation" in spec.effects and (
+        modes[MODE_SLOTS["controller"]] != 0 or two_mass or delay_in_loop)
+    return two_mass_gap or clip_switched
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
