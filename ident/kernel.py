@@ -17,7 +17,7 @@ from numba import njit
 
 from core.effects import EFFECT_NAMES
 from ident.complex_step import cos, div, exp, sin
-from ident.discretisation import foh_blocks
+from ident.discretisation import balanced, foh_blocks
 
 __all__ = ["EFFECTS", "EP_INDEX", "N_EP", "MODE_SLOTS", "N_MODES", "CONTACT_HZ", "CONTACT_DAMPING"]
 
@@ -225,24 +225,9 @@ def _part_blocks(a1, a2, a3, s):
     inside it), cheaply: only the three rows of the exponential the blocks take, by its Taylor
     series on the same balanced matrix — the part's balanced norm is at most a few tenths, so
     24 terms are exact to rounding without squarings; ``foh_blocks`` itself beyond that."""
-    lam = max(abs(a1.real), np.sqrt(abs(a2.real)), np.cbrt(abs(a3.real)), 1.0)
-    w = 2.0 ** np.round(np.log2(lam))
-    if w * abs(s.real) > 0.25:
+    M, S = balanced(a1, a2, a3, s)
+    if S[2] * abs(s.real) > 0.25:  # ω·s
         return foh_blocks(a1, a2, a3, s)
-    S = np.array([1.0 / w, 1.0, w, 1.0, w * w, w, w * w * w])
-    M = np.zeros((7, 7)) + 0.0 * s
-    M[0, 1] = -1.0
-    M[1, 2] = 1.0
-    M[2, 0] = a3
-    M[2, 1] = -a2
-    M[2, 2] = -a1
-    M[0, 3] = 1.0
-    M[2, 4] = 1.0
-    M[3, 5] = 1.0
-    M[4, 6] = 1.0
-    for i in range(7):
-        for j in range(7):
-            M[i, j] = M[i, j] * (S[j] / S[i] * s)
     E = np.zeros((3, 7)) + 0.0 * s
     T = np.zeros((3, 7)) + 0.0 * s
     U = np.zeros((3, 7)) + 0.0 * s
