@@ -35,7 +35,10 @@ MODELS = {
     "backlash, semi-closed": ("backlash", {"gap_mm": 0.06}, 0),
     "backlash, two-mass": ("backlash", {"gap_mm": 0.06, "motor_fraction": 0.75}, 1),
     "stribeck": ("stribeck", {"static_to_coulomb_ratio": 2.0, "stribeck_velocity_mm_s": 1.0}, None),
-    "saturation": ("saturation", {"limit": 3000.0}, 0),
+    # limit_slope started off 0, else its relative span is no span
+    "saturation, anti-windup": ("saturation", {"limit": 3000.0, "limit_slope": 20.0}, 0),
+    "saturation, no anti-windup": ("saturation", {"limit": 3000.0, "limit_slope": 20.0}, 1),
+    "saturation, psi 0.5": ("saturation", {"limit": 3000.0, "limit_slope": 20.0, "position_motor_share": 0.5}, 0),
     "resonance, two-mass": ("resonance", {"freq_hz": 40.0, "damping": 0.05, "motor_fraction": 0.7}, 1),
     "time delay, in the loop": ("time_delay", {"delay_s": 0.0023}, 1),
 }
@@ -94,6 +97,7 @@ def main() -> None:
             cells = [(p, *ripple(off, chunk, p)) for p in names]
             print(f"{name:26s} {controller:4d}  " + "  ".join(
                 f"{p} ripple {r:7.1e} slope {s:+6.2f}" for p, r, s in cells))
+
 
 if __name__ == "__main__":
     main()

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["foh_blocks"]
+__all__ = ["balanced", "foh_blocks"]
 
 
 @njit(cache=True, nogil=True)
@@ -71,20 +71,15 @@ def _expm(M):  # pragma: no cover - numba
 
 
 @njit(cache=True, nogil=True)
-def foh_blocks(a1, a2, a3, h):  # pragma: no cover - numba
-    """``(Φ, Γ0, Γ1)`` of eq. 3.3's linear part over a step ``h`` (s): Φ (3×3), Γ0 and Γ1 (3×2)
-    for the inputs ``[x_r, g]`` (mm, mm/s²), in the number type of ``a1``.
-
-    The augmented matrix is balanced before the exponential: z, x and ẋ (and the inputs) are
-    rescaled by powers of a rate ω (a power of two, so the rescaling rounds nothing) that
-    makes a1, √a2 and ∛a3 entries of one size.  Unbalanced, a3·h (10⁶·10⁻⁴) forces several
-    squarings whose rounding the free run then accumulates over every sub-step.
-    """
+def balanced(a1, a2, a3, h):  # pragma: no cover - numba
+    """``(M, S)``: the augmented matrix of eq. 3.3's linear part times ``h``, balanced by the
+    state and input scales ``S`` (z, x, ẋ, x_r, g, ẋ_r, ġ: powers of a rate ω, a power of two,
+    that makes a1, √a2 and ∛a3 entries of one size), in the number type of ``a1`` and ``h``.
+    Every entry of M is at most a few times ω·h."""
     lam = max(abs(a1.real), np.sqrt(abs(a2.real)), np.cbrt(abs(a3.real)), 1.0)
     w = 2.0 ** np.round(np.log2(lam))
-    # state and input scales: z, x, ẋ, x_r, g, ẋ_r, ġ
     S = np.array([1.0 / w, 1.0, w, 1.0, w * w, w, w * w * w])
-    M = np.zeros((7, 7)) + 0.0 * a1
+    M = np.zeros((7, 7)) + 0.0 * a1 + 0.0 * h
     M[0, 1] = -1.0
     M[1, 2] = 1.0
     M[2, 0] = a3
@@ -97,6 +92,20 @@ def foh_blocks(a1, a2, a3, h):  # pragma: no cover - numba
     for i in range(7):
         for j in range(7):
             M[i, j] = M[i, j] * (S[j] / S[i] * h)
+    return M, S
+
+
+@njit(cache=True, nogil=True)
+def foh_blocks(a1, a2, a3, h):  # pragma: no cover - numba
+    """``(Φ, Γ0, Γ1)`` of eq. 3.3's linear part over a step ``h`` (s): Φ (3×3), Γ0 and Γ1 (3×2)
+    for the inputs ``[x_r, g]`` (mm, mm/s²), in the number type of ``a1``.
+
+    The augmented matrix is balanced before the exponential: z, x and ẋ (and the inputs) are
+    rescaled by powers of a rate ω (a power of two, so the rescaling rounds nothing) that
+    makes a1, √a2 and ∛a3 entries of one size.  Unbalanced, a3·h (10⁶·10⁻⁴) forces several
+    squarings whose rounding the free run then accumulates over every sub-step.
+    """
+    M, S = balanced(a1, a2, a3, h)
     E = _expm(M)
     for i in range(3):
         for j in range(7):

@@ -17,7 +17,7 @@ from numba import njit
 
 from core.effects import EFFECT_NAMES
 from ident.complex_step import cos, div, exp, sin
-from ident.discretisation import foh_blocks
+from ident.discretisation import balanced, foh_blocks
 
 __all__ = ["EFFECTS", "EP_INDEX", "N_EP", "MODE_SLOTS", "N_MODES", "CONTACT_HZ", "CONTACT_DAMPING"]
 
@@ -167,6 +167,283 @@ def _clipped(u, lim, slope, v, ig, windup):
     return u, True
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _free_phase(z, x, vv, md, s, Ph, Ga, Gb, xa, ua, sr, suc, g, a1, a2, a3, d0, d1, rs, on_st, vs):
+    """``(z, x, ẋ, direction)`` after ``s`` seconds of the exact step with the loop's law acting
+    (eq. 3.3's linear part by the first-order-hold blocks ``Ph``, ``Ga``, ``Gb`` of length ``s``;
+    command ``xa`` and drive ``ua`` at the phase's start, slopes ``sr``, ``suc``; ``g`` the
+    effects' held acceleration) and Karnopp friction (eq. 3.2).
+
+    Moving, the level of the current direction (the Stribeck curve at the current speed); when
+    ẋ reaches zero inside the phase the instant is interpolated and the axis reverses if the
+    drive beats the breakaway level of the other side, else it sticks; stuck, it breaks away at
+    the instant, interpolated inside the phase, the drive leaves the breakaway band.  Both
+    instants are interpolated so x̂ is continuous in the parameters.
+    """
+    up = d0 * rs  # breakaway levels (Coulomb without Stribeck)
+    dn = d1 * rs
+    frictional = up.real != 0.0 or dn.real != 0.0
+    if md == 0 and frictional:
+        F = (ua + a3 * z - a2 * x - a1 * vv) + g  # the drive at rest, without friction
+        go_up = F.real > up.real
+        go_dn = F.real < dn.real
+        if go_up and go_dn:  # only if d1 > d0 (unphysical friction): the stronger side wins
+            if (F - up).real >= (dn - F).real:
+                go_dn = False
+            else:
+                go_up = False
+        if go_up:
+            md = 1
+        elif go_dn:
+            md = -1
+        else:  # stuck: friction balances F, x and ẋ = 0 held, z integrates
+            z = z + s * (xa + 0.5 * sr * s) - s * x
+            vv = 0.0 * vv
+            Fb = (ua + suc * s) - a2 * x + a3 * z + g
+            if Fb.real > up.real or Fb.real < dn.real:
+                fb = up if Fb.real > up.real else dn
+                dF = Fb - F
+                tc = div(fb - F, dF) if dF.real != 0.0 else 1.0 + 0.0 * dF
+                if tc.real < 0.0:
+                    tc = 0.0 * tc
+                elif tc.real > 1.0:
+                    tc = 1.0 + 0.0 * tc
+                r = (1.0 - tc) * s
+                acc = Fb - fb  # net acceleration, ramping up from 0 over r
+                vv = 0.5 * acc * r
+                x = x + acc * r * r / 6.0
+                md = 1 if Fb.real > up.real else -1
+            return z, x, vv, md
+    lvl = d0 if md == 1 else d1
+    if on_st:
+        sq = div(vv, vs)
+        lvl = lvl * (1.0 + (rs - 1.0) * exp(-(sq * sq)))
+    gin = ua + g - lvl
+    zn = Ph[0, 0] * z + Ph[0, 1] * x + Ph[0, 2] * vv + Ga[0, 0] * xa + Ga[0, 1] * gin + Gb[0, 0] * sr + Gb[0, 1] * suc
+    xn = Ph[1, 0] * z + Ph[1, 1] * x + Ph[1, 2] * vv + Ga[1, 0] * xa + Ga[1, 1] * gin + Gb[1, 0] * sr + Gb[1, 1] * suc
+    vn = Ph[2, 0] * z + Ph[2, 1] * x + Ph[2, 2] * vv + Ga[2, 0] * xa + Ga[2, 1] * gin + Gb[2, 0] * sr + Gb[2, 1] * suc
+    if md * vn.real <= 0.0 and frictional:
+        # ẋ reached zero inside the phase: interpolate the instant, then reverse (if the drive
+        # beats the other side's breakaway level) or stick.  Without friction nothing sticks:
+        # the linear model exactly.
+        dv = vv - vn
+        tc = div(vv, dv) if dv.real != 0.0 else 1.0 + 0.0 * dv
+        if tc.real < 0.0:
+            tc = 0.0 * tc
+        elif tc.real > 1.0:
+            tc = 1.0 + 0.0 * tc
+        r = (1.0 - tc) * s
+        F = (ua + suc * s) + g - a2 * xn + a3 * zn
+        if md == 1:
+            rev = F.real < dn.real
+            f_new = dn
+        else:
+            rev = F.real > up.real
+            f_new = up
+        if rev:
+            df = f_new - lvl  # friction change over the remaining r seconds
+            vn = vn - df * r
+            xn = xn - 0.5 * df * r * r
+            if md * vn.real < 0.0:
+                md = -md
+            else:
+                vn = 0.0 * vn
+                md = 0
+        else:
+            xn = xn - 0.5 * vn * r  # undo the overshoot past the stop
+            vn = 0.0 * vn
+            md = 0
+    return zn, xn, vn, md
+
+
+@njit(cache=True, nogil=True)
+def _part_blocks(a1, a2, a3, s):
+    """:func:`ident.discretisation.foh_blocks` over a part ``s`` of a sub-step (a clip's switch
+    inside it), cheaply: only the three rows of the exponential the blocks take, by its Taylor
+    series on the same balanced matrix — the part's balanced norm is at most a few tenths, so
+    24 terms are exact to rounding without squarings; ``foh_blocks`` itself beyond that."""
+    M, S = balanced(a1, a2, a3, s)
+    if S[2] * abs(s.real) > 0.25:  # ω·s
+        return foh_blocks(a1, a2, a3, s)
+    E = np.zeros((3, 7)) + 0.0 * s
+    T = np.zeros((3, 7)) + 0.0 * s
+    U = np.zeros((3, 7)) + 0.0 * s
+    for i in range(3):
+        E[i, i] = 1.0
+        T[i, i] = 1.0
+    for k in range(1, 25):
+        for i in range(3):
+            for j in range(7):
+                acc = 0.0 * s
+                for r in range(7):
+                    acc += T[i, r] * M[r, j]
+                U[i, j] = acc / k
+        for i in range(3):
+            for j in range(7):
+                T[i, j] = U[i, j]
+                E[i, j] += U[i, j]
+    for i in range(3):
+        for j in range(7):
+            E[i, j] = E[i, j] * (S[i] / S[j])
+    return E[:, :3].copy(), E[:, 3:5].copy(), E[:, 5:7].copy()
+
+@njit(cache=True, nogil=True)
+def _drive(ua, z, x, vv, xw, a1, a2, a3, psi):
+    """The loop's output before the clip: eq. 3.3's law (command drive ``ua``) with the ψ-share."""
+    return ua + a3 * z - a2 * x - a1 * vv - a2 * psi * (xw - x)
+
+
+@njit(cache=True, nogil=True)
+def _beyond(u, c, lim, slope, vv):
+    """How far the drive output ``u`` lies beyond the clip of side ``c`` (±1; ``c·lim − slope·v``,
+    :func:`_clipped`): positive when that side clips it."""
+    return c * u - lim + c * slope * vv
+
+
+@njit(cache=True, nogil=True)
+def _side(u, lim, slope, vv):
+    """The side (1, −1) whose clip holds ``u``, 0 if none (decided on the real part)."""
+    if _beyond(u, 1, lim, slope, vv).real > 0.0:
+        return 1
+    if _beyond(u, -1, lim, slope, vv).real > 0.0:
+        return -1
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def _fraction(b0, b1):
+    """Where in [0, 1] a quantity linear from ``b0`` to ``b1`` crosses zero (the real part decides
+    the clamp, complex arithmetic elsewhere)."""
+    db = b0 - b1
+    tc = div(b0, db) if db.real != 0.0 else 1.0 + 0.0 * db
+    if tc.real < 0.0:
+        return 0.0 * tc
+    if tc.real > 1.0:
+        return 1.0 + 0.0 * tc
+    return tc
+
+
+@njit(cache=True, nogil=True)
+def _held_phase(z, x, vv, xw, s, c, f, xa, sr, a2, a3, psi, windup, d0, d1, rs, on_st, vs):
+    """``(z, x, ẋ, x_w)`` after ``s`` seconds with the drive clipped on side ``c``: the mass under
+    the held force ``f`` (the clip less any cyclic force; friction and its Karnopp stop as
+    :func:`_friction_step`), the integral by the trapezoid over the part of the phase where it
+    runs on — always with ``windup``, else while its error would not wind the clip up
+    (conditional integration, :func:`_clipped`), the instant its error changes sign
+    interpolated — and ``x_w`` following x over that part."""
+    vn = _friction_step(vv, f, s, 1.0, d0, d1, rs, on_st, vs)
+    xn = x + 0.5 * s * (vv + vn)
+    e0 = xa - x
+    e1 = xa + sr * s - xn
+    p0 = 0.0 * s
+    p1 = 1.0 + 0.0 * s
+    if not windup:
+        ig0 = e0 if psi.real == 0.0 else a3 * e0 - psi * a2 * vv
+        ig1 = e1 if psi.real == 0.0 else a3 * e1 - psi * a2 * vn
+        on0 = c * ig0.real <= 0.0
+        on1 = c * ig1.real <= 0.0
+        if not (on0 or on1):
+            return z, xn, vn, xw
+        if on0 != on1:
+            tc = _fraction(ig0, ig1)
+            if on0:
+                p1 = tc
+            else:
+                p0 = tc
+    ea = e0 + p0 * (e1 - e0)
+    eb = e0 + p1 * (e1 - e0)
+    return z + 0.5 * s * (p1 - p0) * (ea + eb), xn, vn, xw + (p1 - p0) * (xn - x)
+
+
+@njit(cache=True, nogil=True)
+def _sliding_phase(z, x, vv, xw, s, c, cyc, xa, sr, ua1, a1, a2, a3, psi, lim, slope, d0, d1, rs, on_st, vs):
+    """``(z, x, ẋ, x_w)`` after ``s`` seconds on the clip's edge of side ``c`` (conditional
+    integration): clipped the loop's output falls back inside the limit, free it rises beyond
+    it, so the output stays at the limit (a Filippov sliding motion) — the mass under the
+    held clip, the integral (and x_w) running on the fraction of its rate, in [0, 1], that ends
+    the phase with the output ``ua1 + …`` at the limit."""
+    vn = _friction_step(vv, c * lim - slope * vv - cyc, s, 1.0, d0, d1, rs, on_st, vs)
+    xn = x + 0.5 * s * (vv + vn)
+    dz = 0.5 * s * ((xa - x) + (xa + sr * s - xn))
+    dxw = xn - x
+    slope_al = a3 * dz - a2 * psi * dxw
+    miss = c * lim - slope * vn - _drive(ua1, z, xn, vn, xw, a1, a2, a3, psi)
+    if slope_al.real == 0.0:
+        al = 0.0 * miss
+    else:
+        al = div(miss, slope_al)
+        if al.real < 0.0:
+            al = 0.0 * al
+        elif al.real > 1.0:
+            al = 1.0 + 0.0 * al
+    return z + al * dz, xn, vn, xw + al * dxw
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _saturated_step(z, x, vv, md, xw, h, Ph, Ga, Gb, xa, ua, sr, suc, cyc, a1, a2, a3, psi, lim, slope, windup,
+                    d0, d1, rs, on_st, vs):
+    """``(z, x, ẋ, direction, x_w)`` after one sub-step of the exact path with a saturation.
+
+    The clip's onset and release (and with them the integral's freeze) are located inside the
+    sub-step, as the friction's reversal and breakaway are: the sub-step is stepped in the
+    state of its start (free, :func:`_free_phase`; clipped, :func:`_held_phase`); if the loop's
+    output ends it on the other side of the limit, the instant it crossed is interpolated
+    linearly between the two ends (on the output's distance beyond the limit, :func:`_beyond`)
+    and the sub-step is stepped again: the part before in the state of the start, the part
+    after in the other (the exact step's blocks of the part's length).  Should the part after
+    cross back by its end, the output slides on the limit (:func:`_sliding_phase`).  Every
+    switch then moves continuously with the parameters, so x̂ is continuous in them and the
+    complex-step slope is the cost's trend, not one ripple of sub-step switches.  ``cyc``: a
+    cyclic force, held; ``Ph``, ``Ga``, ``Gb``: the blocks of a whole sub-step ``h``.
+    """
+    ua1 = ua + suc * h
+    u0 = _drive(ua, z, x, vv, xw, a1, a2, a3, psi)
+    c0 = _side(u0, lim, slope, vv)
+    g = -a2 * psi * (xw - x) - cyc
+    if c0 == 0:
+        z1, x1, v1, md1 = _free_phase(z, x, vv, md, h, Ph, Ga, Gb, xa, ua, sr, suc, g, a1, a2, a3, d0, d1, rs, on_st, vs)
+        xw1 = xw + (x1 - x)
+        u1 = _drive(ua1, z1, x1, v1, xw1, a1, a2, a3, psi)
+        c = _side(u1, lim, slope, v1)
+        if c == 0:
+            return z1, x1, v1, md1, xw1
+        tc = _fraction(_beyond(u0, c, lim, slope, vv), _beyond(u1, c, lim, slope, v1))
+        s = tc * h
+        P1, G1, H1 = _part_blocks(a1, a2, a3, s)
+        z2, x2, v2, md = _free_phase(z, x, vv, md, s, P1, G1, H1, xa, ua, sr, suc, g, a1, a2, a3, d0, d1, rs, on_st, vs)
+        xw2 = xw + (x2 - x)
+        xa2 = xa + sr * s
+        r = h - s
+        z3, x3, v3, xw3 = _held_phase(z2, x2, v2, xw2, r, c, c * lim - slope * v2 - cyc, xa2, sr, a2, a3, psi, windup,
+                                      d0, d1, rs, on_st, vs)
+        if not windup and _beyond(_drive(ua1, z3, x3, v3, xw3, a1, a2, a3, psi), c, lim, slope, v3).real <= 0.0:
+            z3, x3, v3, xw3 = _sliding_phase(z2, x2, v2, xw2, r, c, cyc, xa2, sr, ua1, a1, a2, a3, psi, lim, slope,
+                                             d0, d1, rs, on_st, vs)
+    else:
+        c = c0
+        z1, x1, v1, xw1 = _held_phase(z, x, vv, xw, h, c, c * lim - slope * vv - cyc, xa, sr, a2, a3, psi, windup,
+                                      d0, d1, rs, on_st, vs)
+        b1 = _beyond(_drive(ua1, z1, x1, v1, xw1, a1, a2, a3, psi), c, lim, slope, v1)
+        if b1.real > 0.0:
+            return z1, x1, v1, (1 if v1.real > 0.0 else (-1 if v1.real < 0.0 else 0)), xw1
+        tc = _fraction(_beyond(u0, c, lim, slope, vv), b1)
+        s = tc * h
+        z2, x2, v2, xw2 = _held_phase(z, x, vv, xw, s, c, c * lim - slope * vv - cyc, xa, sr, a2, a3, psi, windup,
+                                      d0, d1, rs, on_st, vs)
+        md = 1 if v2.real > 0.0 else (-1 if v2.real < 0.0 else 0)
+        xa2 = xa + sr * s
+        r = h - s
+        P2, G2, H2 = _part_blocks(a1, a2, a3, r)
+        g2 = -a2 * psi * (xw2 - x2) - cyc
+        z3, x3, v3, md = _free_phase(z2, x2, v2, md, r, P2, G2, H2, xa2, ua + suc * s, sr, suc, g2, a1, a2,
+                                     a3, d0, d1, rs, on_st, vs)
+        xw3 = xw2 + (x3 - x2)
+        if not windup and _beyond(_drive(ua1, z3, x3, v3, xw3, a1, a2, a3, psi), c, lim, slope, v3).real > 0.0:
+            z3, x3, v3, xw3 = _sliding_phase(z2, x2, v2, xw2, r, c, cyc, xa2, sr, ua1, a1, a2, a3, psi, lim, slope,
+                                             d0, d1, rs, on_st, vs)
+    return z3, x3, v3, (1 if v3.real > 0.0 else (-1 if v3.real < 0.0 else 0)), xw3
+
+
 @njit(cache=True, nogil=True)
 def _loop_delayed(buf, bi, p, u, dsteps, nb):
     """``u`` into set ``p``'s ring buffer of sub-step values and, out of it, the u of ``dsteps``
@@ -217,6 +494,8 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     rec_motor = rs_two and modes[_MD_RESONANCE] == 3
     two = bl_loop or rs_two
     td_loop = on_td and modes[_MD_DELAY] == 1
+    # the clip's onset and release located inside the exact step (not behind an in-loop delay)
+    sa_events = on_sa and not td_loop
     cy_force = on_cy and modes[_MD_CYCLIC] == 1
     sampled = modes[_MD_CONTROLLER] != 0
     causal = modes[_MD_CONTROLLER] == 2
@@ -410,15 +689,12 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
             # The linear part of eq. 3.3 advances exactly (:func:`ident.discretisation.foh_blocks`):
             # the command position ``xa`` and drive ``ua`` linear over the sub-step (slopes ``sr``,
             # ``suc``), friction and every effect's input held at their values at the sub-step's
-            # start — the saturation clip, the in-loop delay and the cyclic force as the applied u
-            # less the linear law's, the ψ-share as ``−a2·ψ·(x_w − x)``, the anti-windup freeze as an
-            # input on ż cancelling ``x_r − x`` (exact for the linear part, first order in the
-            # nonlinearity: an exponential-Euler step).  Friction follows Karnopp: moving, the level
-            # of the current direction (the Stribeck curve at the current speed); when ẋ reaches zero
-            # inside the sub-step the instant is interpolated and the axis reverses if the drive beats
-            # the breakaway level of the other side, else it sticks; stuck, it breaks away at the
-            # instant, interpolated inside the sub-step, the drive leaves the breakaway band.  Both
-            # instants are interpolated so x̂ is continuous in the parameters.
+            # start — the in-loop delay and the cyclic force as the applied u less the linear law's,
+            # the ψ-share as ``−a2·ψ·(x_w − x)`` (exact for the linear part, first order in the
+            # nonlinearity: an exponential-Euler step).  Friction follows Karnopp (:func:`_free_phase`),
+            # its reversal and breakaway instants interpolated inside the sub-step; a saturation's
+            # clip onset and release (and the integral's freeze) are located inside it the same way
+            # (:func:`_saturated_step`), so x̂ is continuous in the parameters.
             # A set's sub-steps run one after the other with its state in registers (the lockstep
             # over sets is per sample here): the chain of one sub-step is short.
             for p in range(P):
@@ -431,130 +707,63 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 for j in range(nsub):
                     xa = xr[k] + sr * (j * h)
                     ua = uck + suc * (j * h)
-                    ulin = ua + a3[p] * z - a2[p] * x - a1[p] * vv
-                    g = 0.0 * ua  # the effects' acceleration, held
-                    wz = 0.0 * ua  # the anti-windup input on ż, held
-                    wx = True
-                    held = False  # the drive's output clipped: the loop does not act inside the sub-step
-                    if extra[p]:
-                        u = ulin - a2[p] * psi[p] * (xw[p] - x)
-                        if on_sa:
-                            ig = xa - x if psi[p].real == 0.0 else a3[p] * (xa - x) - psi[p] * a2[p] * vv
-                            u_free = u
-                            u, wind = _clipped(u, lim[p], lsl[p], vv, ig, sa_windup)
-                            held = u.real != u_free.real
-                            wx = wind
-                            if not wind:
-                                wz = x - xa
-                        if want_u and j == 0:
-                            OUT_U[p, k] = u
-                        if td_loop:
-                            # the drive applies what its loop computed a dead time ago: the
-                            # loop's law does not act inside the sub-step either
-                            u = _loop_delayed(buf, bi, p, u, dsteps[p], nbuf[p])
-                            held = True
-                        if cy_force:
-                            u -= cs[p] * sin(tw[p] * x) + cc[p] * cos(tw[p] * x)
-                        g = u - ulin
-                    elif want_u and j == 0:
-                        OUT_U[p, k] = ulin
-                    up = d0[p] * rs[p]  # breakaway levels (Coulomb without Stribeck)
-                    dn = d1[p] * rs[p]
-                    frictional = up.real != 0.0 or dn.real != 0.0
                     v_old = vv
                     x_old = x
-                    stuck = False
-                    if held:
-                        # Clipped, or a dead time in the loop, the drive applies a force its
-                        # loop's present state does not set: the held-input correction of the
-                        # exponential step would let the loop's law act inside the sub-step (a
-                        # clipped integral wound up by a3·h·(x_r − x) per sub-step, as large
-                        # as the limit itself; a delay shortened by the feedback acting at
-                        # once).  The mass under the held force, exact for a force held over
-                        # the sub-step (friction and its Karnopp stop as _friction_step), the
-                        # integral by the trapezoid.
-                        vn = _friction_step(vv, u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
-                        xn = x + 0.5 * h * (vv + vn)
-                        if wx:
-                            z = z + h * (xa + 0.5 * sr * h) - 0.5 * h * (x + xn)
-                        x = xn
-                        vv = vn
-                        md = 1 if vn.real > 0.0 else (-1 if vn.real < 0.0 else 0)
-                    elif md == 0 and frictional:
-                        F = ulin + g  # the drive at rest, without friction
-                        go_up = F.real > up.real
-                        go_dn = F.real < dn.real
-                        if go_up and go_dn:  # only if d1 > d0 (unphysical friction): the stronger side wins
-                            if (F - up).real >= (dn - F).real:
-                                go_dn = False
-                            else:
-                                go_up = False
-                        if go_up:
-                            md = 1
-                        elif go_dn:
-                            md = -1
-                        else:  # stuck: friction balances F, x and ẋ = 0 held, z integrates
-                            stuck = True
-                            z = z + h * (xa + 0.5 * sr * h) - h * x + h * wz
-                            vv = 0.0 * vv
-                            Fb = (ua + suc * h) - a2[p] * x + a3[p] * z + g
-                            if Fb.real > up.real or Fb.real < dn.real:
-                                fb = up if Fb.real > up.real else dn
-                                dF = Fb - F
-                                tc = div(fb - F, dF) if dF.real != 0.0 else 1.0 + 0.0 * dF
-                                if tc.real < 0.0:
-                                    tc = 0.0 * tc
-                                elif tc.real > 1.0:
-                                    tc = 1.0 + 0.0 * tc
-                                r = (1.0 - tc) * h
-                                acc = Fb - fb  # net acceleration, ramping up from 0 over r
-                                vv = 0.5 * acc * r
-                                x = x + acc * r * r / 6.0
-                                md = 1 if Fb.real > up.real else -1
-                    if not (stuck or held):
-                        lvl = d0[p] if md == 1 else d1[p]
-                        if on_st:
-                            sq = div(vv, vs[p])
-                            lvl = lvl * (1.0 + (rs[p] - 1.0) * exp(-(sq * sq)))
-                        gin = ua + g - lvl
-                        xin = xa + wz
-                        zn = PH[p, 0, 0] * z + PH[p, 0, 1] * x + PH[p, 0, 2] * vv + GA[p, 0, 0] * xin + GA[p, 0, 1] * gin + GB[p, 0, 0] * sr + GB[p, 0, 1] * suc
-                        xn = PH[p, 1, 0] * z + PH[p, 1, 1] * x + PH[p, 1, 2] * vv + GA[p, 1, 0] * xin + GA[p, 1, 1] * gin + GB[p, 1, 0] * sr + GB[p, 1, 1] * suc
-                        vn = PH[p, 2, 0] * z + PH[p, 2, 1] * x + PH[p, 2, 2] * vv + GA[p, 2, 0] * xin + GA[p, 2, 1] * gin + GB[p, 2, 0] * sr + GB[p, 2, 1] * suc
-                        if md * vn.real <= 0.0 and frictional:
-                            # ẋ reached zero inside the sub-step: interpolate the instant, then reverse (if
-                            # the drive beats the other side's breakaway level) or stick.  Without friction
-                            # nothing sticks: the linear model exactly.
-                            dv = vv - vn
-                            tc = div(vv, dv) if dv.real != 0.0 else 1.0 + 0.0 * dv
-                            if tc.real < 0.0:
-                                tc = 0.0 * tc
-                            elif tc.real > 1.0:
-                                tc = 1.0 + 0.0 * tc
-                            r = (1.0 - tc) * h
-                            F = (ua + suc * h) + g - a2[p] * xn + a3[p] * zn
-                            if md == 1:
-                                rev = F.real < dn.real
-                                f_new = dn
-                            else:
-                                rev = F.real > up.real
-                                f_new = up
-                            if rev:
-                                df = f_new - lvl  # friction change over the remaining r seconds
-                                vn = vn - df * r
-                                xn = xn - 0.5 * df * r * r
-                                if md * vn.real < 0.0:
-                                    md = -md
-                                else:
-                                    vn = 0.0 * vn
-                                    md = 0
-                            else:
-                                xn = xn - 0.5 * vn * r  # undo the overshoot past the stop
-                                vn = 0.0 * vn
-                                md = 0
-                        z = zn
-                        x = xn
-                        vv = vn
+                    if sa_events:
+                        # the clip's onset and release located inside the sub-step
+                        cyc = cs[p] * sin(tw[p] * x) + cc[p] * cos(tw[p] * x) if cy_force else 0.0 * ua
+                        if want_u and j == 0:
+                            u0 = _drive(ua, z, x, vv, xw[p], a1[p], a2[p], a3[p], psi[p])
+                            c0 = _side(u0, lim[p], lsl[p], vv)
+                            OUT_U[p, k] = u0 if c0 == 0 else c0 * lim[p] - lsl[p] * vv
+                        z, x, vv, md, xw[p] = _saturated_step(
+                            z, x, vv, md, xw[p], h, PH[p], GA[p], GB[p], xa, ua, sr, suc, cyc, a1[p], a2[p], a3[p],
+                            psi[p], lim[p], lsl[p], sa_windup, d0[p], d1[p], rs[p], on_st, vs[p])
+                        wx = False  # x_w moved with the step
+                    else:
+                        ulin = ua + a3[p] * z - a2[p] * x - a1[p] * vv
+                        g = 0.0 * ua  # the effects' acceleration, held
+                        wx = True
+                        held = False  # the drive's output clipped: the loop does not act inside the sub-step
+                        if extra[p]:
+                            u = ulin - a2[p] * psi[p] * (xw[p] - x)
+                            if on_sa:
+                                ig = xa - x if psi[p].real == 0.0 else a3[p] * (xa - x) - psi[p] * a2[p] * vv
+                                u_free = u
+                                u, wind = _clipped(u, lim[p], lsl[p], vv, ig, sa_windup)
+                                held = u.real != u_free.real
+                                wx = wind
+                            if want_u and j == 0:
+                                OUT_U[p, k] = u
+                            if td_loop:
+                                # the drive applies what its loop computed a dead time ago: the
+                                # loop's law does not act inside the sub-step either
+                                u = _loop_delayed(buf, bi, p, u, dsteps[p], nbuf[p])
+                                held = True
+                            if cy_force:
+                                u -= cs[p] * sin(tw[p] * x) + cc[p] * cos(tw[p] * x)
+                            g = u - ulin
+                        elif want_u and j == 0:
+                            OUT_U[p, k] = ulin
+                        if held:
+                            # Clipped, or a dead time in the loop, the drive applies a force its
+                            # loop's present state does not set: the held-input correction of the
+                            # exponential step would let the loop's law act inside the sub-step (a
+                            # clipped integral wound up by a3·h·(x_r − x) per sub-step, as large
+                            # as the limit itself; a delay shortened by the feedback acting at
+                            # once).  The mass under the held force, exact for a force held over
+                            # the sub-step (friction and its Karnopp stop as _friction_step), the
+                            # integral by the trapezoid.
+                            vn = _friction_step(vv, u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
+                            xn = x + 0.5 * h * (vv + vn)
+                            if wx:
+                                z = z + h * (xa + 0.5 * sr * h) - 0.5 * h * (x + xn)
+                            x = xn
+                            vv = vn
+                            md = 1 if vn.real > 0.0 else (-1 if vn.real < 0.0 else 0)
+                        else:
+                            z, x, vv, md = _free_phase(z, x, vv, md, h, PH[p], GA[p], GB[p], xa, ua, sr, suc, g,
+                                                       a1[p], a2[p], a3[p], d0[p], d1[p], rs[p], on_st, vs[p])
                     if wx:
                         xw[p] += x - x_old
                     if on_bl:

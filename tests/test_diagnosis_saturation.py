@@ -84,10 +84,7 @@ def test_the_virtual_cnc_amplifier_limit_is_named_with_its_limit_and_viscous_slo
     assert p["limit_slope"] == pytest.approx(plant.B / plant.J, rel=0.5)
 
 
-@pytest.mark.parametrize("windup", [True, pytest.param(False, marks=pytest.mark.xfail(
-    strict=True, reason="known miss on the exactly stepped kernel: the frozen integral's fit ends "
-                        "in a neighbouring valley (limit +2.7 %, the base moved 5-10 %, 160x the truth's cost); "
-                        "the fit from the truth stays there"))], ids=["winding_up", "frozen"])
+@pytest.mark.parametrize("windup", [True, False], ids=["winding_up", "frozen"])
 def test_a_long_recording_is_fitted_with_the_drive_limit_slope_and_integral(windup):
     """14 s: long enough for the race to cut windows (2 × race_seconds), were the integral's
     wound-up state readable at a restart; it is not, so saturation races on segments from

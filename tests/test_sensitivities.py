@@ -122,13 +122,17 @@ def test_a_fit_with_the_exact_jacobian_gets_where_differences_get(monkeypatch):
 
 
 def test_a_model_whose_cost_ripples_is_fitted_by_differences():
-    """A saturation's clip switches on sub-step instants: its exact slope is a ripple's
-    (benchmarks/bench_cost_ripple.py), so its fit reads the trend by differences.  A two-mass
-    backlash's contact is resolved inside the sub-step (tests/test_kernel_contact_events.py):
-    its exact slope is the trend's."""
+    """A saturation on the sampled controller clips at samples: its exact slope is a ripple's
+    (benchmarks/bench_cost_ripple.py), so its fit reads the trend by differences.  On the
+    exact step (continuous controller) the clip's instants are located inside the sub-step,
+    and a two-mass backlash's contact likewise (tests/test_kernel_clip_events.py,
+    tests/test_kernel_contact_events.py): their exact slope is the trend's."""
     from ident.diagnosis.candidates import rippled
 
-    assert rippled(ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0))
+    sampled = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
+    sampled.modes[4] = 1
+    assert rippled(sampled)
+    assert not rippled(ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0))
     assert not rippled(ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": 0.01, "motor_fraction": 0.7}, 1))
     assert not rippled(ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": 0.01}, 0))
     assert not rippled(ModelSpec(THETA.copy()).with_effect("stribeck", {"static_to_coulomb_ratio": 2.0,
@@ -144,6 +148,7 @@ def test_with_exact_jacobians_asked_for_a_rippled_model_still_takes_differences(
 
     chunk = _chunk()[0]
     spec = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
+    spec.modes[4] = 1  # the sampled controller: the clip switches at samples
     monkeypatch.setattr(spec_module, "sensitivities", lambda *a, **k: pytest.fail("an exact Jacobian was taken"))
     cand.fit_spec(spec, chunk, max_iter=2, cfg=replace(DEFAULT, exact_fine=True, exact_rough=True))
 

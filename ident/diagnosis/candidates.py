@@ -58,14 +58,20 @@ __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse
 
 def rippled(spec: ModelSpec) -> bool:
     """Whether ``spec``'s free-run cost ripples in its parameters on a scale finer than any
-    useful step: a saturation (clip and integrator freeze switch at sub-step instants).
-    There the exact slope is the slope of one ripple — up to 30 times the trend
-    (benchmarks/bench_cost_ripple.py) — and a fit reads the trend by differences instead;
-    on the other models the exact slope is the trend's: a Coulomb stick's switch instant
-    and a two-mass backlash's contact instants are resolved inside the sub-step
-    (:func:`ident.kernel._contact_push`), so the free run is continuous in the parameters.
+    useful step: a saturation off the kernel's exact step — on the sampled controller, a
+    two-mass model or behind a dead time in the loop, where clip and integrator freeze
+    switch at sub-step or sample instants.  There the exact slope is the slope of one
+    ripple — up to 30 times the trend (benchmarks/bench_cost_ripple.py) — and a fit reads
+    the trend by differences instead.  On the other models the exact slope is the trend's:
+    Coulomb stick, a two-mass backlash's contact (:func:`ident.kernel._contact_push`) and
+    the saturation on the exact step (single mass, continuous controller;
+    :func:`ident.kernel._saturated_step`) have their switch instants resolved inside the
+    sub-step, so the free run is continuous in the parameters.
     """
-    return "saturation" in spec.effects
+    modes = spec.modes
+    two_mass = any(e in spec.effects and modes[MODE_SLOTS[e]] >= 1 for e in ("backlash", "resonance"))
+    delay_in_loop = "time_delay" in spec.effects and modes[MODE_SLOTS["time_delay"]] == 1
+    return "saturation" in spec.effects and (modes[MODE_SLOTS["controller"]] != 0 or two_mass or delay_in_loop)
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
