@@ -85,14 +85,14 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     ``fit_base``; ``also_free`` frees further parameters of the effects (a variant's
     structure parameter the search holds); ``bounds`` narrows the box of named effect parameters; parameters named in
     ``spec.ranges`` (weakly determined, centred by :func:`centre_delay`) are held.
-    ``fd_step``: the forward-difference step (scaled units; default ``cfg.fd_step``; an
-    effect may fix its own for a parameter); a step coarser than ``cfg.fd_step`` is followed
-    by a polish at the fine step (half the iterations) when ``polish``.  With
-    ``cfg.exact_fine`` (``cfg.exact_rough``) the fine (coarse) step is not a difference: it
-    stands for the exact Jacobian, the complex-step sensitivities of the simulation
-    (:func:`~ident.diagnosis.augmented.sensitivities`) — but for a parameter with a step of
-    its effect's own, and on a model whose cost ripples (:func:`rippled`), where every
-    column is a difference.  ``secant_nfev`` > 0:
+    ``fd_step``: the forward-difference step (scaled units; default ``cfg.fd_step``); a
+    step coarser than ``cfg.fd_step`` is followed by a polish at the fine step (half the
+    iterations) when ``polish``.  With ``cfg.exact_fine`` (``cfg.exact_rough``) the fine
+    (coarse) step is not a difference: it stands for the exact Jacobian, the complex-step
+    sensitivities of the simulation (:func:`~ident.diagnosis.spec.residual_jacobian`) —
+    but on a model whose cost ripples (:func:`rippled`), where every column is a
+    difference.  With ``cfg.fit_log`` an effect parameter whose box lies above zero is
+    fitted by its logarithm.  ``secant_nfev`` > 0:
     the secant Levenberg–Marquardt (:func:`ident.least_squares.secant_lm`) with that many
     simulations instead, no polish.  ``search``: a fit of an effect's search (the race and its
     polish), for ``cfg.fit_beta``.  Returns the fitted copy; a fit that fails to improve
@@ -156,7 +156,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     z0 = np.minimum(np.maximum(z0, lb), ub)
 
     def steps(h: float) -> np.ndarray:  # difference step per scaled parameter
-        return np.concatenate([np.full(nb, h), [eff.fd_step.get(p, h) for p, eff in zip(names, own)]])
+        return np.full(nb + len(names), h)
 
     nsub = sim_substeps(spec, chunk.Ts)
     m = chunk.score
@@ -240,16 +240,13 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         moved.theta, moved.ep = th, ep
         return residual_jacobian(moved, chunk, d_th, d_ep, restarts=restarts, nsub=nsub)
 
-    # a parameter with a step of its effect's own keeps its difference, read through a
-    # ripple on purpose
-    own_step = [nb + i for i, (p, eff) in enumerate(zip(names, own)) if p in eff.fd_step]
     rough = rippled(spec)
 
     def how(h: float) -> dict:  # the Jacobian of a fit at difference step h
         exact = (cfg.exact_fine if h <= cfg.fd_step else cfg.exact_rough) and not rough
         # the columns simulated together, in two threads (the kernel runs outside the GIL;
         # ident.least_squares._jacobian): the same result, sooner
-        return dict(parallel=True, resid_many=resid_many, step=steps(h), jac=jac if exact else None, jac_skip=own_step)
+        return dict(parallel=True, resid_many=resid_many, step=steps(h), jac=jac if exact else None)
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
         if secant_nfev > 0:

@@ -5,7 +5,7 @@ model of eq. 3.3 leaves out, so the algorithm in :mod:`ident.diagnosis.diagnose`
 search in :mod:`ident.diagnosis.candidates` never ask which effect they hold:
 
 - ``free(spec)``: the parameters the output-error fit moves (names of ``EP_INDEX``),
-  ``bounds``/``scale_floor``/``fd_step`` for each; ``added``: how many the acceptance rule
+  ``bounds``/``scale_floor`` for each; ``added``: how many the acceptance rule
   charges for;
 - ``starts(base, chunk, evidence)``: starting models, led by the residual's localisation
   (spectrum peaks, position periodogram, |u| percentiles) and covering each structural
@@ -90,8 +90,6 @@ class Effect:
     added: int = 1
     #: scale floors of the fit's scaled coordinates z = p / max(|p0|, floor)
     scale_floor: dict[str, float] = {}
-    #: per-parameter difference steps that hold whatever the base step
-    fd_step: dict[str, float] = {}
     #: two-mass variants (a stiff contact or a mode inside the loop) simulate on up to
     #: 16 sub-steps a sample: their searches take 3-5x the others' and are started first,
     #: so the diagnosis's two worker threads end together

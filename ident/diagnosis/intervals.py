@@ -99,8 +99,7 @@ class _Columns:
         floors = np.array([base_floors[j] if e is None else EFFECT_MODELS[e].scale_floor.get(n, 1e-6)
                            for e, j, n in self.cols])
         self.scale = np.maximum(np.abs(v0), floors)
-        self.steps = np.array([cfg.fd_step_rough if e is None else EFFECT_MODELS[e].fd_step.get(n, cfg.fd_step_rough)
-                               for e, _, n in self.cols]) * self.scale
+        self.steps = cfg.fd_step_rough * self.scale
 
     def values(self, spec: ModelSpec) -> np.ndarray:
         return np.array([spec.theta[j] if e is None else spec.ep[j] for e, j, _ in self.cols], dtype=float)
