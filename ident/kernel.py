@@ -287,6 +287,7 @@ def _part_blocks(a1, a2, a3, s):
             E[i, j] = E[i, j] * (S[i] / S[j])
     return E[:, :3].copy(), E[:, 3:5].copy(), E[:, 5:7].copy()
 
+
 @njit(cache=True, nogil=True)
 def _drive(ua, z, x, vv, xw, a1, a2, a3, psi):
     """The loop's output before the clip: eq. 3.3's law (command drive ``ua``) with the ψ-share."""
@@ -308,6 +309,13 @@ def _side(u, lim, slope, vv):
     if _beyond(u, -1, lim, slope, vv).real > 0.0:
         return -1
     return 0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _direction(v):
+    """The Karnopp state of a mass moving at ``v`` after a held-force step: 1 moving +, −1
+    moving −, 0 at rest (decided on the real part)."""
+    return 1 if v.real > 0.0 else (-1 if v.real < 0.0 else 0)
 
 
 @njit(cache=True, nogil=True)
@@ -425,12 +433,12 @@ def _saturated_step(z, x, vv, md, xw, h, Ph, Ga, Gb, xa, ua, sr, suc, cyc, a1, a
                                       d0, d1, rs, on_st, vs)
         b1 = _beyond(_drive(ua1, z1, x1, v1, xw1, a1, a2, a3, psi), c, lim, slope, v1)
         if b1.real > 0.0:
-            return z1, x1, v1, (1 if v1.real > 0.0 else (-1 if v1.real < 0.0 else 0)), xw1
+            return z1, x1, v1, _direction(v1), xw1
         tc = _fraction(_beyond(u0, c, lim, slope, vv), b1)
         s = tc * h
         z2, x2, v2, xw2 = _held_phase(z, x, vv, xw, s, c, c * lim - slope * vv - cyc, xa, sr, a2, a3, psi, windup,
                                       d0, d1, rs, on_st, vs)
-        md = 1 if v2.real > 0.0 else (-1 if v2.real < 0.0 else 0)
+        md = _direction(v2)
         xa2 = xa + sr * s
         r = h - s
         P2, G2, H2 = _part_blocks(a1, a2, a3, r)
@@ -441,7 +449,7 @@ def _saturated_step(z, x, vv, md, xw, h, Ph, Ga, Gb, xa, ua, sr, suc, cyc, a1, a
         if not windup and _beyond(_drive(ua1, z3, x3, v3, xw3, a1, a2, a3, psi), c, lim, slope, v3).real > 0.0:
             z3, x3, v3, xw3 = _sliding_phase(z2, x2, v2, xw2, r, c, cyc, xa2, sr, ua1, a1, a2, a3, psi, lim, slope,
                                              d0, d1, rs, on_st, vs)
-    return z3, x3, v3, (1 if v3.real > 0.0 else (-1 if v3.real < 0.0 else 0)), xw3
+    return z3, x3, v3, _direction(v3), xw3
 
 
 @njit(cache=True, nogil=True)
@@ -760,7 +768,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                                 z = z + h * (xa + 0.5 * sr * h) - 0.5 * h * (x + xn)
                             x = xn
                             vv = vn
-                            md = 1 if vn.real > 0.0 else (-1 if vn.real < 0.0 else 0)
+                            md = _direction(vn)
                         else:
                             z, x, vv, md = _free_phase(z, x, vv, md, h, PH[p], GA[p], GB[p], xa, ua, sr, suc, g,
                                                        a1[p], a2[p], a3[p], d0[p], d1[p], rs[p], on_st, vs[p])

@@ -165,18 +165,22 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     x_m = chunk.x[sel]
     flags = spec.flags()
 
-    def unpack(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        th = th0.copy()
+    def unpack_many(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # the parameter sets of the rows of Z
+        TH = np.repeat(th0[None, :], len(Z), axis=0)
         if nb:
-            th[:] = z[:8] * s_th
+            TH[:] = Z[:, :8] * s_th
             if beta:
-                th[5] += th[1]
-        ep = ep0.copy()
+                TH[:, 5] += TH[:, 1]
+        EP = np.repeat(ep0[None, :], len(Z), axis=0)
         if idx:
-            ze = z[nb:].copy()
-            ze[logs] = np.exp(ze[logs])
-            ep[idx] = ze * s_ep
-        return th, ep
+            ZE = Z[:, nb:].copy()
+            ZE[:, logs] = np.exp(ZE[:, logs])
+            EP[:, idx] = ZE * s_ep
+        return TH, EP
+
+    def unpack(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        TH, EP = unpack_many(z[None, :])
+        return TH[0], EP[0]
 
     # multiple-shooting windows: the restart states are estimated per window along the
     # responses of the start's model (held through the fit: they barely move with it)
@@ -196,19 +200,6 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         r = weighted(simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, th, flags=flags, ep=ep, modes=spec.modes,
                                         starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm))
         return estimated_states(r, spec.effects, ep, spec.modes, chunk, restarts)
-
-    def unpack_many(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # row p is unpack(Z[p]), bit for bit
-        TH = np.repeat(th0[None, :], len(Z), axis=0)
-        if nb:
-            TH[:] = Z[:, :8] * s_th
-            if beta:
-                TH[:, 5] += TH[:, 1]
-        EP = np.repeat(ep0[None, :], len(Z), axis=0)
-        if idx:
-            ZE = Z[:, nb:].copy()
-            ZE[:, logs] = np.exp(ZE[:, logs])
-            EP[:, idx] = ZE * s_ep
-        return TH, EP
 
     def resid_many(Z: np.ndarray) -> np.ndarray:  # row p is resid(Z[p]), bit for bit
         TH, EP = unpack_many(Z)
