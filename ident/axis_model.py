@@ -38,7 +38,7 @@ __all__ = ["AxisModel", "BASE_KEYS", "EFFECT_NAMES", "CONTROLLERS"]
 # SPEC §7 effects an axis model can carry (external_force is described, never simulated),
 # in the order of the augmented simulator's flag vector.
 #: The control law's forms, in the order of the augmented simulator's controller slot
-#: (``modes[4]``): eq. 3.3 as written, sampled and held, and sampled with the feed-forward
+#: (``modes[MODE_SLOTS["controller"]]``): eq. 3.3 as written, sampled and held, and sampled with the feed-forward
 #: differentiating the command causally.
 CONTROLLERS = ("continuous", "sampled", "sampled_causal")
 
@@ -115,14 +115,14 @@ class AxisModel:
     # -- the augmented simulator's arrays ----------------------------------------------
     def spec_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(θ, flags, ep, modes) in the layout of :mod:`ident.diagnosis.augmented`."""
-        from ident.diagnosis.augmented import EFFECTS, N_EP, N_MODES
+        from ident.diagnosis.augmented import EFFECTS, MODE_SLOTS, N_EP, N_MODES
         from ident.diagnosis.effects import EFFECT_MODELS
 
         theta = base_vector(self.model)
         flags = np.array([1 if e in self.effects else 0 for e in EFFECTS], dtype=np.int64)
         ep = np.zeros(N_EP)
         modes = np.zeros(N_MODES, dtype=np.int64)
-        modes[4] = CONTROLLERS.index(self.controller)
+        modes[MODE_SLOTS["controller"]] = CONTROLLERS.index(self.controller)
         for name in EFFECTS:  # in the simulator's order: effects may share a slot (ψ)
             if name in self.effects:
                 EFFECT_MODELS[name].set_arrays(self.effects[name], ep, modes)

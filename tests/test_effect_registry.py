@@ -167,12 +167,14 @@ def test_the_axis_model_carries_what_the_diagnosis_reports(effect, params, mode)
 
 @pytest.mark.parametrize("name", EFFECT_NAMES)
 def test_the_simulators_truth_is_told_in_the_identified_models_words(name):
-    kj = load_machine("fadal-ppi").axes["X"].plant.K_over_J
-    truth = sim.model_equivalent(sim.EFFECTS[name](), kj)
+    plant = load_machine("fadal-ppi").axes["X"].plant
+    kj = plant.K_over_J
+    truth = sim.model_equivalent(sim.EFFECTS[name](), kj, plant.B_over_J)
     assert set(truth) <= set(EFFECTS[name].names(MODEL))
     AxisModel(DriveModel(*THETA), TS, effects={name: truth})  # admissible as a model
     if name == "saturation":  # V → mm/s² through the axis's K/J
         assert truth["limit"] == pytest.approx(kj * sim.Saturation().limit_v)
+        assert truth["limit_slope"] == plant.B_over_J  # the viscous share eq. 3.3's a1 holds
 
 
 @pytest.mark.parametrize("name, key, bad", [

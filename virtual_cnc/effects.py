@@ -252,12 +252,15 @@ def format_effect(effect: Effect) -> str:
     return f"{effect.name}=" + ",".join(parts)
 
 
-def model_equivalent(effect: Effect, k_over_j: float) -> dict:
+def model_equivalent(effect: Effect, k_over_j: float, b_over_j: float = 0.0) -> dict:
     """The simulator's ``effect`` in the identified model's parameters (SPEC §7 words, the
     registry's :data:`~core.effects.MODEL` names): what a diagnosis that recovered it exactly
     would report.  ``k_over_j`` [mm/(V·s²)] is the axis's control-to-acceleration gain K/J,
     which turns the amplifier limit ``limit_v`` [V] into the control-equivalent acceleration
-    ``limit`` [mm/s²] the identified model clips.  The virtual CNC's forms: a full-closed
+    ``limit`` [mm/s²] the identified model clips; ``b_over_j`` [1/s], the plant's viscous
+    pole B/J, is the model's ``limit_slope``: eq. 3.3's u is the amplifier's output less the
+    viscous share B/J·ẋ that a1 holds, so the clip of u falls by B/J per mm/s of speed in the
+    direction it pushes.  The virtual CNC's forms: a full-closed
     two-mass backlash and mode, a disturbance cyclic error; a feedback delay acts inside the
     loop, which the model tells as actuation."""
     entry = REGISTRY[effect.name]
@@ -275,5 +278,6 @@ def model_equivalent(effect: Effect, k_over_j: float) -> dict:
         return {"period_mm": effect.period_mm, "amplitude": effect.amplitude, "phase_rad": effect.phase_rad,
                 "kind": "disturbance", "amplitude_unit": entry.parameter("amplitude").unit_by_variant["disturbance"]}
     if isinstance(effect, Saturation):
-        return {"limit": k_over_j * effect.limit_v, "limit_unit": entry.parameter("limit").unit, "anti_windup": True}
+        return {"limit": k_over_j * effect.limit_v, "limit_unit": entry.parameter("limit").unit,
+                "limit_slope": b_over_j, "anti_windup": True}
     raise TypeError(f"not an effect of the virtual CNC: {effect!r}")
