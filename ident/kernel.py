@@ -453,6 +453,133 @@ def _saturated_step(z, x, vv, md, xw, h, Ph, Ga, Gb, xa, ua, sr, suc, cyc, a1, a
 
 
 @njit(cache=True, nogil=True)
+def _pair_flow(w2, c, t):
+    """``exp([[0, 1], [−w2, −c]]·t)`` as (Φ00, Φ01, Φ10, Φ11): the flow of ë + c·ė + w2·e = 0
+    over ``t``, in closed form (the number type of ``w2``; branches on the real part).
+    With ω_d² = w2 − c²/4 and s(t) = sin(ω_d t)/ω_d (sinh when ω_d² < 0, t at ω_d = 0):
+    Φ = e^(−ct/2)·[[cos + (c/2)·s, s], [−w2·s, cos − (c/2)·s]]."""
+    q = w2 - 0.25 * c * c
+    g = exp(-0.5 * c * t)
+    if abs(q.real) * t.real * t.real < 1e-8:  # near critical damping: the series of cos and s
+        x2 = q * t * t
+        cs = 1.0 - 0.5 * x2 + x2 * x2 / 24.0
+        sn = t * (1.0 - x2 / 6.0 + x2 * x2 / 120.0)
+    elif q.real > 0.0:
+        wd = np.sqrt(q)
+        cs = cos(wd * t)
+        sn = div(sin(wd * t), wd)
+    else:
+        wo = np.sqrt(-q)
+        ep, em = exp(wo * t), exp(-wo * t)
+        cs = 0.5 * (ep + em)
+        sn = div(0.5 * (ep - em), wo)
+    return g * (cs + 0.5 * c * sn), g * sn, -g * w2 * sn, g * (cs - 0.5 * c * sn)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _pair(F, e, de, g):
+    """The oscillator ë + c·ė + w2·e = w2·g (``g`` held) advanced by its flow ``F``
+    (:func:`_pair_flow`): the deviation from the static deflection ``g`` decays along the
+    free flow."""
+    a = e - g
+    return F[0] * a + F[1] * de + g, F[2] * a + F[3] * de
+
+
+@njit(cache=True, nogil=True)
+def _two_mass_flows(mu, kc, cd, h):
+    """The per-set constants of :func:`_two_mass_step` over a sub-step ``h``: the flows
+    (:func:`_pair_flow`) of the free-free mode and of the motor on the spring to a held
+    table, their w2 and c, and 1/kc."""
+    mred = mu * (1.0 - mu)
+    w2f, cf = div(kc, mred), div(cd, mred)
+    w2a, ca = div(kc, mu), div(cd, mu)
+    fr = _pair_flow(w2f, cf, h)
+    fa = _pair_flow(w2a, ca, h)
+    return (fr[0], fr[1], fr[2], fr[3], fa[0], fa[1], fa[2], fa[3], w2f, cf, w2a, ca, div(1.0 + 0.0 * kc, kc))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _two_mass_phase(xm, vm, xt, vt, u, t, ff, stuck, mu, F, ikc):
+    """Motor (share μ) and table (1 − μ) coupled by a spring-damper over ``t`` under the
+    held drive force ``u`` on the motor and the held friction ``ff`` on the table, exactly:
+    the centre of mass as a double integrator under u − ff, the deflection as the free-free
+    mode (``F`` its flow over ``t``; static deflection (μ_t·u + μ·ff)/kc); ``stuck``: the
+    table held by friction, the motor on the spring to it (``F`` the locked-table flow,
+    static deflection u/kc)."""
+    if stuck:
+        x, v = _pair(F, xm - xt, vm, u * ikc)
+        return xt + x, v, xt, 0.0 * vt
+    mt = 1.0 - mu
+    a = u - ff
+    X = mu * xm + mt * xt + t * (mu * vm + mt * vt) + 0.5 * t * t * a
+    V = mu * vm + mt * vt + t * a
+    dl, ddl = _pair(F, xm - xt, vm - vt, (mt * u + mu * ff) * ikc)
+    return X + mt * dl, V + mt * ddl, X - mu * dl, V - mu * ddl
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _two_mass_step(xm, vm, xt, vt, u, h, mu, kc, cd, C, d0, d1, rs, on_st, vs):
+    """One sub-step of the two-mass drive under a drive force ``u`` held over it (the
+    sampled controller's output), exact for the linear part (:func:`_two_mass_phase`;
+    ``C`` the set's :func:`_two_mass_flows` over ``h``), the table's friction (eq. 3.2,
+    Stribeck at the phase's starting speed) held per phase with Karnopp's stick: a table
+    that reverses inside the sub-step stops at the interpolated instant, and one at rest
+    breaks away at the interpolated instant its spring force passes the breakaway level —
+    so the run is continuous in the parameters, as the single mass's exact step is.  The
+    phases after an event take their flow over the rest of the sub-step."""
+    FR = (C[0], C[1], C[2], C[3])
+    FA = (C[4], C[5], C[6], C[7])
+    ikc = C[12]
+    t = h
+    broke = False
+    lvl = d0 * rs  # the breakaway level once ``broke``
+    for _ in range(4):
+        if t.real <= 0.0:
+            break
+        whole = t.real == h.real
+        if vt.real != 0.0 or broke:
+            if vt.real != 0.0:
+                d = d0 if vt.real > 0.0 else d1
+                ff = d
+                if on_st:
+                    q = div(vt, vs)
+                    ff = d * (1.0 + (rs - 1.0) * exp(-(q * q)))
+            else:  # breaking away, at the level of the side of the stick band the spring force left
+                ff = lvl
+            F = FR if whole else _pair_flow(C[8], C[9], t)
+            xm1, vm1, xt1, vt1 = _two_mass_phase(xm, vm, xt, vt, u, t, ff, False, mu, F, ikc)
+            if vt.real == 0.0 or vt1.real * vt.real > 0.0:
+                return xm1, vm1, xt1, vt1
+            # the table stops inside: slide to the interpolated instant, then from rest
+            tau = t * div(vt, vt - vt1)
+            xm, vm, xt, vt = _two_mass_phase(xm, vm, xt, vt, u, tau, ff, False, mu, _pair_flow(C[8], C[9], tau), ikc)
+            vt = 0.0 * vt
+            t = t - tau
+            broke = False
+            continue
+        fc0 = kc * (xm - xt) + cd * vm
+        if fc0.real > (d0 * rs).real or fc0.real < (d1 * rs).real:
+            lvl = d0 * rs if fc0.real > (d0 * rs).real else d1 * rs
+            broke = True
+            continue
+        F = FA if whole else _pair_flow(C[10], C[11], t)
+        xm1, vm1, xt1, vt1 = _two_mass_phase(xm, vm, xt, vt, u, t, 0.0 * u, True, mu, F, ikc)
+        fc1 = kc * (xm1 - xt1) + cd * vm1
+        if fc1.real > (d0 * rs).real:
+            lvl = d0 * rs
+        elif fc1.real < (d1 * rs).real:
+            lvl = d1 * rs
+        else:
+            return xm1, vm1, xt1, vt1
+        # the spring force passes the breakaway level inside: held to the interpolated instant
+        tau = t * div(lvl - fc0, fc1 - fc0)
+        xm, vm, xt, vt = _two_mass_phase(xm, vm, xt, vt, u, tau, 0.0 * u, True, mu, _pair_flow(C[10], C[11], tau), ikc)
+        t = t - tau
+        broke = True
+    return xm, vm, xt, vt
+
+
+@njit(cache=True, nogil=True)
 def _loop_delayed(buf, bi, p, u, dsteps, nb):
     """``u`` into set ``p``'s ring buffer of sub-step values and, out of it, the u of ``dsteps``
     sub-steps ago (linear between sub-steps): the dead time inside the loop."""
@@ -590,6 +717,23 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     # 0 stuck), the command drive at the sample and its slope, and whether any effect adds a
     # held input.
     exact = not two and not sampled
+    # A two-mass mode (no gap) under the sampled controller's held output: the sub-step is
+    # exact for its linear part (:func:`_two_mass_step`), per set the flows of the free-free
+    # mode and of the motor on the spring to a table held by friction.
+    two_exact = sampled and rs_two and not bl_loop
+    # On the exact step the filter of resonance mode 0 on the recorded position is driven by
+    # the mass's mean acceleration over each sub-step, held, and advanced by its flow — exact
+    # for that input, so its frequency sets no sub-step.
+    QF = np.zeros((P, 4), dtype=TH.dtype)
+    qg = np.zeros(P, dtype=TH.dtype)
+    if on_rs and not rs_two and exact:
+        for p in range(P):
+            QF[p, :] = _pair_flow(wr[p] * wr[p], 2.0 * zr[p] * wr[p], h + 0.0 * a1[p])
+            qg[p] = div(-kr[p], wr[p] * wr[p])  # static deflection per mm/s² of acceleration
+    TM = np.zeros((P, 13), dtype=TH.dtype)
+    if two_exact:
+        for p in range(P):
+            TM[p, :] = _two_mass_flows(mu[p], kc[p], cdmp[p], h + 0.0 * a1[p])
     PH = np.zeros((P, 3, 3), dtype=TH.dtype)
     GA = np.zeros((P, 3, 2), dtype=TH.dtype)
     GB = np.zeros((P, 3, 2), dtype=TH.dtype)
@@ -633,7 +777,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                         xt[p] = xm[p]
                     # Euler's velocities live at half sub-steps; the exact step's at the sub-step.
-                    v[p] = vk if exact or at_rest else vk - 0.5 * h * ak
+                    v[p] = vk if exact or two_exact or at_rest else vk - 0.5 * h * ak
                     vt[p] = v[p]
                     if exact and vk.real != 0.0:
                         dir_[p] = 1 if vk.real > 0.0 else -1
@@ -780,10 +924,8 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         elif (x - xt[p]).real < -half[p].real:
                             xt[p] = x + half[p]
                     if on_rs:
-                        acc = div(vv - v_old, h)
-                        qdd = -2.0 * zr[p] * wr[p] * qd[p] - wr[p] * wr[p] * q[p] - kr[p] * acc
-                        qd[p] += h * qdd
-                        q[p] += h * qd[p]
+                        q[p], qd[p] = _pair((QF[p, 0], QF[p, 1], QF[p, 2], QF[p, 3]), q[p], qd[p],
+                                            qg[p] * div(vv - v_old, h))
                 ei[p] = z
                 xm[p] = x
                 v[p] = vv
@@ -818,7 +960,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                             uh, wh = _clipped(uh, lim[p], lsl[p], vfb, ig, sa_windup)
                         if wh:
                             ei[p] = ei_new
-                        u = uh if first[p] else 0.5 * (u_last[p] + uh)
+                        u = uh if first[p] or two_exact else 0.5 * (u_last[p] + uh)
                         u_last[p] = uh
                         u_h[p] = uh
                         wind_h[p] = wh
@@ -841,6 +983,15 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     u = _loop_delayed(buf, bi, p, u, dsteps[p], nbuf[p])
                 if cy_force:
                     u -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
+                if two_exact:
+                    x_old = xm[p]
+                    C = (TM[p, 0], TM[p, 1], TM[p, 2], TM[p, 3], TM[p, 4], TM[p, 5], TM[p, 6], TM[p, 7],
+                         TM[p, 8], TM[p, 9], TM[p, 10], TM[p, 11], TM[p, 12])
+                    xm[p], v[p], xt[p], vt[p] = _two_mass_step(xm[p], v[p], xt[p], vt[p], u, h + 0.0 * u, mu[p],
+                                                               kc[p], cdmp[p], C, d0[p], d1[p], rs[p], on_st, vs[p])
+                    if wind_x[p]:
+                        xw[p] += xm[p] - x_old
+                    continue
                 if two:
                     dl = xm[p] - xt[p]
                     ddl = v[p] - vt[p]
@@ -875,7 +1026,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         xt[p] = xm[p] - half[p]
                     elif (xm[p] - xt[p]).real < -half[p].real:
                         xt[p] = xm[p] + half[p]
-                if on_rs:
+                if on_rs:  # the kick is centred on the sub-step's start here: the filter takes Euler's step
                     qdd = -2.0 * zr[p] * wr[p] * qd[p] - wr[p] * wr[p] * q[p] - kr[p] * acc
                     qd[p] += h * qdd
                     q[p] += h * qd[p]

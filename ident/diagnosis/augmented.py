@@ -75,12 +75,19 @@ law's, the ψ-share ``−a2·ψ·(x_w − x)``, the anti-windup freeze as an inp
 ``x_r − x`` (exact for the linear part, first order in the nonlinearity: an exponential-Euler
 step).  The output-side effects (capture delay, cyclic position error, the semi-closed
 gap of backlash mode 0, the filter of resonance mode 0 driven by the sub-step's mean
-acceleration) act on that run.  This is the simulator of the identified model too
-(:class:`ident.simulation.FreeRun`: no effect, ``start_rule`` 1).  The two-mass variants
-(backlash modes 1–2, resonance modes 1–3) and the sampled controller take semi-implicit
-Euler steps (for a force held over the sub-step on a double integrator, leapfrog is exact;
-the spring and the contact are what it approximates): commanded position and velocity
-interpolated linearly inside a sample, acceleration held.
+acceleration, held, and advanced by its flow — exact for that input) act on that run.  This is the simulator of the identified model too
+(:class:`ident.simulation.FreeRun`: no effect, ``start_rule`` 1).  A two-mass mode
+(resonance modes 1–3, no gap) under the sampled controller is stepped exactly too: the
+controller's output is held over the sample, so between samples the drive is linear but for
+the table's friction — the centre of mass a double integrator under u less friction, the
+deflection the free-free mode, each advanced by its flow, the motor on the spring to a
+table that friction holds by the locked-table flow — with the table's reversal and
+breakaway instants located inside the sub-step (:func:`ident.kernel._two_mass_step`); its
+frequency then sets no sub-step.  The other two-mass variants (backlash modes 1–2; a mode
+under the continuous controller) and the sampled controller's single mass take
+semi-implicit Euler steps (for a force held over the sub-step on a double integrator,
+leapfrog is exact; the spring and the contact are what it approximates): commanded
+position and velocity interpolated linearly inside a sample, acceleration held.
 Velocities live at half sub-steps in this scheme, so on the sampled controller the first
 sub-step of a sample, which straddles the switch of the held ``u``, gets the mean of the
 old and new value: without it the model leads the digital loop by half a sub-step (0.25 ms
@@ -105,7 +112,7 @@ import numpy as np
 
 from ident.axis_model import CONTROLLERS  # noqa: F401  (re-exported)
 from ident.kernel import (  # noqa: F401  (re-exported: the kernel's layout is this module's vocabulary)
-    _FL_BACKLASH, _FL_RESONANCE, _FREQ, _MD_BACKLASH, _MD_RESONANCE, CONTACT_DAMPING, CONTACT_HZ, EFFECTS,
+    _FL_BACKLASH, _FL_RESONANCE, _FREQ, _MD_BACKLASH, _MD_CONTROLLER, _MD_RESONANCE, CONTACT_DAMPING, CONTACT_HZ, EFFECTS,
     EP_INDEX, MODE_SLOTS, N_EP, N_MODES, _many, _padded_modes, _runnable)
 
 __all__ = [
@@ -188,13 +195,22 @@ def model_substeps(theta: np.ndarray, Ts: float, flags: np.ndarray, ep: np.ndarr
     """Sub-steps per sample for the augmented model: :func:`substeps` with its fastest mode.
 
     A resonance's mode at 1.5 × its frequency (a damped mode's closed-loop poles sit above
-    the free one).  The stiff contact of a two-mass backlash variant (:data:`CONTACT_HZ`)
+    the free one) — but where the kernel steps the mode exactly: a two-mass mode under the
+    sampled controller (:func:`ident.kernel._two_mass_step`) and the filter of mode 0 on the
+    continuous controller's exact step.  The stiff contact of a two-mass backlash variant (:data:`CONTACT_HZ`)
     needs stability only, not phase accuracy: its frequency is a stand-in for "stiff", not
     a fitted value, so its sub-step turns at most :data:`CONTACT_STEP_RAD`.
     """
-    f = ep[_FREQ] if flags[_FL_RESONANCE] else 0.0
+    two_mode = flags[_FL_RESONANCE] and modes[_MD_RESONANCE] >= 1
+    gap_two = flags[_FL_BACKLASH] and modes[_MD_BACKLASH] >= 1
+    # a two-mass mode under the sampled controller is stepped exactly (kernel._two_mass_step):
+    # its frequency sets no step
+    exact_mode = two_mode and modes[_MD_CONTROLLER] != 0 and not gap_two
+    # so is the filter of mode 0 on the continuous controller's exact step (a single mass)
+    exact_mode = exact_mode or (flags[_FL_RESONANCE] and not two_mode and not gap_two and modes[_MD_CONTROLLER] == 0)
+    f = ep[_FREQ] if flags[_FL_RESONANCE] and not exact_mode else 0.0
     n = substeps(theta, Ts, 1.5 * f)
-    if flags[_FL_BACKLASH] and modes[_MD_BACKLASH] >= 1 and not (flags[_FL_RESONANCE] and modes[_MD_RESONANCE] >= 1):
+    if gap_two and not two_mode:
         n = max(n, math.ceil(Ts * 2.0 * math.pi * CONTACT_HZ / CONTACT_STEP_RAD))
     return n
 
