@@ -705,6 +705,12 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     ei = np.zeros_like(a1)
     vb = np.zeros_like(a1)
     vb_prev = np.zeros_like(a1)
+    # the continuous controller's two-mass mode (no gap): the last kicks' accelerations of
+    # motor and table, to read the velocities at the kick's instant (second order)
+    two_mid = two and not sampled and not bl_loop
+    am = np.zeros_like(a1)
+    at = np.zeros_like(a1)
+    hk = np.zeros(P, dtype=np.bool_)  # the first kick after a restart is a half kick
     xm_prev = np.zeros_like(a1)
     xw = np.zeros_like(a1)
     wind_x = np.ones(P, dtype=np.bool_)
@@ -756,6 +762,9 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 xt[p] = xm[p]
                 v[p] = 0.0
                 vt[p] = 0.0
+                am[p] = 0.0
+                at[p] = 0.0
+                hk[p] = two_mid
                 q[p] = 0.0
                 qd[p] = 0.0
                 ei[p] = (a2[p] * xm[p] - b2[p] * xr[k]) / a3[p] if a3[p].real != 0.0 else 0.0
@@ -777,7 +786,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                         xt[p] = xm[p]
                     # Euler's velocities live at half sub-steps; the exact step's at the sub-step.
-                    v[p] = vk if exact or two_exact or at_rest else vk - 0.5 * h * ak
+                    v[p] = vk if exact or two_exact or two_mid or at_rest else vk - 0.5 * h * ak
                     vt[p] = v[p]
                     if exact and vk.real != 0.0:
                         dir_[p] = 1 if vk.real > 0.0 else -1
@@ -802,7 +811,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                             xm[p] = xt[p] + (half[p] if sv.real > 0.0 else -half[p])
                     xw[p] = xm[p]
                     xfb = xt[p] if (two and not fb_motor) else xm[p]
-                    vf = v[p]
+                    vf = vk if two_mid else v[p]  # the velocity the loop reads at the restart
                     e_int = 0.0
                     ff = b0[p] * ar[k] + b1[p] * vr[k]
                     if sampled:
@@ -935,6 +944,9 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
             f = j / nsub
             xrj = xr[k] + f * (xr[k + 1] - xr[k])
             vrj = vr[k] + f * (vr[k + 1] - vr[k])
+            # the command's acceleration linear between samples too, as on the exact step
+            # (held, its step at every sample costs the kick scheme its second order)
+            arj = ar[k] + f * (ar[k + 1] - ar[k]) if two_mid else ar[k]
             for p in range(P):
                 xfb = xt[p] if (two and not fb_motor) else xm[p]
                 xp = (1.0 - psi[p]) * xfb + psi[p] * xw[p]
@@ -970,12 +982,14 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     wind = False
                     wind_x[p] = wind_h[p]
                 else:
-                    u = b0[p] * ar[k] + b1[p] * vrj + b2[p] * xrj + a3[p] * ei[p] - a2[p] * xp - a1[p] * v[p]
+                    # velocities at the kick's instant: a half step on from Euler's
+                    vk_ = v[p] + 0.5 * h * am[p] if two_mid else v[p]
+                    u = b0[p] * arj + b1[p] * vrj + b2[p] * xrj + a3[p] * ei[p] - a2[p] * xp - a1[p] * vk_
                     wind = True
                     wind_x[p] = True
                     if on_sa:
-                        ig = xrj - xfb if psi[p].real == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * v[p]
-                        u, wind = _clipped(u, lim[p], lsl[p], v[p], ig, sa_windup)
+                        ig = xrj - xfb if psi[p].real == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * vk_
+                        u, wind = _clipped(u, lim[p], lsl[p], vk_, ig, sa_windup)
                         wind_x[p] = wind
                 if want_u and j == 0:
                     OUT_U[p, k] = u
@@ -999,16 +1013,26 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     if hc.real > 0.0:
                         fc = (_contact_push(dl - hc, ddl, kc[p], cdmp[p], h)
                               - _contact_push(-dl - hc, -ddl, kc[p], cdmp[p], h))
+                    elif two_mid:
+                        fc = kc[p] * dl + cdmp[p] * (ddl + 0.5 * h * (am[p] - at[p]))
                     else:
                         fc = kc[p] * dl + cdmp[p] * ddl
-                    vn = v[p] + div(h * (u - fc), mu[p])
+                    # (after a restart the velocities are at the restart's instant: a half kick)
+                    hh = 0.5 * h if hk[p] else h
+                    vn = v[p] + div(hh * (u - fc), mu[p])
                     mt = 1.0 - mu[p]
-                    vtn = _friction_step(vt[p], fc, h, mt, d0[p], d1[p], rs[p], on_st, vs[p])
+                    vtn = _friction_step(vt[p], fc, hh, mt, d0[p], d1[p], rs[p], on_st, vs[p])
+                    if two_mid:
+                        am[p] = div(vn - v[p], hh)
+                        at[p] = div(vtn - vt[p], hh)
+                        hk[p] = False
                     v[p] = vn
                     vt[p] = vtn
                     xm[p] += h * vn
                     xt[p] += h * vtn
-                    if wind:
+                    if wind and two_mid:  # the integral by the midpoint of the feedback's move
+                        ei[p] += h * (xrj + 0.5 * h * sr - xfb - 0.5 * h * (vn if fb_motor else vtn))
+                    elif wind:
                         ei[p] += h * (xrj - xfb)
                     if wind_x[p]:
                         xw[p] += h * vn

@@ -75,19 +75,24 @@ law's, the ψ-share ``−a2·ψ·(x_w − x)``, the anti-windup freeze as an inp
 ``x_r − x`` (exact for the linear part, first order in the nonlinearity: an exponential-Euler
 step).  The output-side effects (capture delay, cyclic position error, the semi-closed
 gap of backlash mode 0, the filter of resonance mode 0 driven by the sub-step's mean
-acceleration, held, and advanced by its flow — exact for that input) act on that run.  This is the simulator of the identified model too
-(:class:`ident.simulation.FreeRun`: no effect, ``start_rule`` 1).  A two-mass mode
-(resonance modes 1–3, no gap) under the sampled controller is stepped exactly too: the
-controller's output is held over the sample, so between samples the drive is linear but for
-the table's friction — the centre of mass a double integrator under u less friction, the
-deflection the free-free mode, each advanced by its flow, the motor on the spring to a
-table that friction holds by the locked-table flow — with the table's reversal and
-breakaway instants located inside the sub-step (:func:`ident.kernel._two_mass_step`); its
-frequency then sets no sub-step.  The other two-mass variants (backlash modes 1–2; a mode
-under the continuous controller) and the sampled controller's single mass take
-semi-implicit Euler steps (for a force held over the sub-step on a double integrator,
-leapfrog is exact; the spring and the contact are what it approximates): commanded
-position and velocity interpolated linearly inside a sample, acceleration held.
+acceleration, held, and advanced by its flow — exact for that input) act on that run.
+This is the simulator of the identified model too (:class:`ident.simulation.FreeRun`: no
+effect, ``start_rule`` 1).  A two-mass mode (resonance modes 1–3, no gap) under the
+sampled controller is stepped exactly too: the controller's output is held over the
+sample, so between samples the drive is linear but for the table's friction — the centre
+of mass a double integrator under u less friction, the deflection the free-free mode, each
+advanced by its flow, the motor on the spring to a table that friction holds by the
+locked-table flow — with the table's reversal and breakaway instants located inside the
+sub-step (:func:`ident.kernel._two_mass_step`); its frequency then sets no sub-step.  A
+two-mass mode under the continuous controller takes kick-and-drift (leapfrog) sub-steps
+with every force read at the kick's instant — the velocities a half step on from the last
+kick's, the command's position, velocity and acceleration linear between samples (as on
+the exact step), the integral by the midpoint of the feedback's move, a half kick after
+every restart — second order in the sub-step.  The two-mass backlash variants (the
+contact) and the sampled controller's single mass take semi-implicit Euler steps (for a
+force held over the sub-step on a double integrator, leapfrog is exact; the spring and the
+contact are what it approximates): commanded position and velocity interpolated linearly
+inside a sample, acceleration held.
 Velocities live at half sub-steps in this scheme, so on the sampled controller the first
 sub-step of a sample, which straddles the switch of the held ``u``, gets the mean of the
 old and new value: without it the model leads the digital loop by half a sub-step (0.25 ms
