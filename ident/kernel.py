@@ -705,9 +705,9 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     ei = np.zeros_like(a1)
     vb = np.zeros_like(a1)
     vb_prev = np.zeros_like(a1)
-    # the continuous controller's two-mass mode (no gap): the last kicks' accelerations of
-    # motor and table, to read the velocities at the kick's instant (second order)
-    two_mid = two and not sampled and not bl_loop
+    # the continuous controller's two-mass drive: the last kicks' accelerations of motor and
+    # table, to read the velocities at the kick's instant (second order)
+    two_mid = two and not (sampled and rs_two and not bl_loop)
     am = np.zeros_like(a1)
     at = np.zeros_like(a1)
     hk = np.zeros(P, dtype=np.bool_)  # the first kick after a restart is a half kick
@@ -1010,7 +1010,13 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     dl = xm[p] - xt[p]
                     ddl = v[p] - vt[p]
                     hc = half_c[p]
-                    if hc.real > 0.0:
+                    if hc.real > 0.0 and two_mid:
+                        # the contact's mean push over the kick's span, centred on its instant
+                        ddl = ddl + 0.5 * h * (am[p] - at[p])
+                        a0 = dl - hc - 0.5 * h * ddl
+                        fc = (_contact_push(a0, ddl, kc[p], cdmp[p], h)
+                              - _contact_push(-dl - hc + 0.5 * h * ddl, -ddl, kc[p], cdmp[p], h))
+                    elif hc.real > 0.0:
                         fc = (_contact_push(dl - hc, ddl, kc[p], cdmp[p], h)
                               - _contact_push(-dl - hc, -ddl, kc[p], cdmp[p], h))
                     elif two_mid:

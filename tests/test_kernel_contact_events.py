@@ -72,3 +72,18 @@ def test_the_exact_slope_of_the_two_mass_run_in_the_gap_is_the_slope_a_differenc
     # off at 6 nm and 30-60 times at 0.6 µm: its exact slope is a stair's.
     assert off(central(1e-4)) < 0.5
     assert off(central(1e-2)) < 1.0
+
+
+@pytest.mark.parametrize("mode", [1, 2])
+@pytest.mark.parametrize("controller", [0, 1])
+def test_the_two_mass_drive_across_a_gap_is_second_order_in_the_sub_step(mode, controller):
+    """Kick and drift with the contact's mean push over the kick's span, centred on its
+    instant, and the velocities read there: the error quarters as the sub-steps double."""
+    spec = ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": GAP, "motor_fraction": 0.75}, mode)
+    spec.modes[4] = controller
+    x_r = point_to_point(3)
+    chunk = make_chunk(x_r, x_r, TS, segment_starts(x_r.size, None))
+    n0 = sim_substeps(spec, chunk.Ts)
+    fine = simulate_spec(spec, chunk, nsub=32 * n0)
+    err = {m: np.sqrt(np.mean((simulate_spec(spec, chunk, nsub=m * n0) - fine) ** 2)) for m in (2, 4, 8)}
+    assert err[2] / err[4] > 2.8 and err[4] / err[8] > 2.8  # first order would halve it

@@ -83,16 +83,16 @@ sample, so between samples the drive is linear but for the table's friction — 
 of mass a double integrator under u less friction, the deflection the free-free mode, each
 advanced by its flow, the motor on the spring to a table that friction holds by the
 locked-table flow — with the table's reversal and breakaway instants located inside the
-sub-step (:func:`ident.kernel._two_mass_step`); its frequency then sets no sub-step.  A
-two-mass mode under the continuous controller takes kick-and-drift (leapfrog) sub-steps
-with every force read at the kick's instant — the velocities a half step on from the last
-kick's, the command's position, velocity and acceleration linear between samples (as on
-the exact step), the integral by the midpoint of the feedback's move, a half kick after
-every restart — second order in the sub-step.  The two-mass backlash variants (the
-contact) and the sampled controller's single mass take semi-implicit Euler steps (for a
-force held over the sub-step on a double integrator, leapfrog is exact; the spring and the
-contact are what it approximates): commanded position and velocity interpolated linearly
-inside a sample, acceleration held.
+sub-step (:func:`ident.kernel._two_mass_step`); its frequency then sets no sub-step.  The
+other two-mass drives (a mode under the continuous controller, the backlash variants on
+either) take kick-and-drift (leapfrog) sub-steps with every force read at the kick's
+instant — the velocities a half step on from the last kick's, a gap's contact as its mean
+push over the kick's span centred there, on the continuous controller the command's
+position, velocity and acceleration linear between samples (as on the exact step) and the
+integral by the midpoint of the feedback's move, a half kick after every restart — second
+order in the sub-step.  The sampled controller's single mass takes the same kicks and
+drifts with the output held (exact for a force held over the sub-step on a double
+integrator).
 Velocities live at half sub-steps in this scheme, so on the sampled controller the first
 sub-step of a sample, which straddles the switch of the held ``u``, gets the mean of the
 old and new value: without it the model leads the digital loop by half a sub-step (0.25 ms
