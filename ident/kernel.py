@@ -705,12 +705,13 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     ei = np.zeros_like(a1)
     vb = np.zeros_like(a1)
     vb_prev = np.zeros_like(a1)
-    # the continuous controller's two-mass drive: the last kicks' accelerations of motor and
-    # table, to read the velocities at the kick's instant (second order)
-    two_mid = two and not (sampled and rs_two and not bl_loop)
+    # The two-mass drives' kick-and-drift sub-steps (all but a mode under the sampled
+    # controller, stepped exactly): the last kicks' accelerations of motor and table, to
+    # read the velocities at the kick's instant (second order), and whether the next kick is
+    # the half kick after a restart.
     am = np.zeros_like(a1)
     at = np.zeros_like(a1)
-    hk = np.zeros(P, dtype=np.bool_)  # the first kick after a restart is a half kick
+    hk = np.zeros(P, dtype=np.bool_)
     xm_prev = np.zeros_like(a1)
     xw = np.zeros_like(a1)
     wind_x = np.ones(P, dtype=np.bool_)
@@ -727,6 +728,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     # exact for its linear part (:func:`_two_mass_step`), per set the flows of the free-free
     # mode and of the motor on the spring to a table held by friction.
     two_exact = sampled and rs_two and not bl_loop
+    two_mid = two and not two_exact
     # On the exact step the filter of resonance mode 0 on the recorded position is driven by
     # the mass's mean acceleration over each sub-step, held, and advanced by its flow — exact
     # for that input, so its frequency sets no sub-step.
@@ -785,8 +787,9 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     if on_cy and not cy_force:
                         xm[p] -= cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
                         xt[p] = xm[p]
-                    # Euler's velocities live at half sub-steps; the exact step's at the sub-step.
-                    v[p] = vk if exact or two_exact or two_mid or at_rest else vk - 0.5 * h * ak
+                    # The sampled single mass's velocities live at half sub-steps (its first kick is
+                    # whole); every other step's at the sub-step.
+                    v[p] = vk - 0.5 * h * ak if sampled and not two and not at_rest else vk
                     vt[p] = v[p]
                     if exact and vk.real != 0.0:
                         dir_[p] = 1 if vk.real > 0.0 else -1
@@ -811,7 +814,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                             xm[p] = xt[p] + (half[p] if sv.real > 0.0 else -half[p])
                     xw[p] = xm[p]
                     xfb = xt[p] if (two and not fb_motor) else xm[p]
-                    vf = vk if two_mid else v[p]  # the velocity the loop reads at the restart
+                    vf = vk  # the velocity the loop reads at the restart
                     e_int = 0.0
                     ff = b0[p] * ar[k] + b1[p] * vr[k]
                     if sampled:
@@ -946,7 +949,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
             vrj = vr[k] + f * (vr[k + 1] - vr[k])
             # the command's acceleration linear between samples too, as on the exact step
             # (held, its step at every sample costs the kick scheme its second order)
-            arj = ar[k] + f * (ar[k + 1] - ar[k]) if two_mid else ar[k]
+            arj = ar[k] + f * (ar[k + 1] - ar[k])
             for p in range(P):
                 xfb = xt[p] if (two and not fb_motor) else xm[p]
                 xp = (1.0 - psi[p]) * xfb + psi[p] * xw[p]
@@ -981,9 +984,8 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         u = u_h[p]
                     wind = False
                     wind_x[p] = wind_h[p]
-                else:
-                    # velocities at the kick's instant: a half step on from Euler's
-                    vk_ = v[p] + 0.5 * h * am[p] if two_mid else v[p]
+                else:  # (continuous and not exact: a two-mass drive) the velocity at the kick's instant
+                    vk_ = v[p] + 0.5 * h * am[p]
                     u = b0[p] * arj + b1[p] * vrj + b2[p] * xrj + a3[p] * ei[p] - a2[p] * xp - a1[p] * vk_
                     wind = True
                     wind_x[p] = True
@@ -1010,36 +1012,28 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     dl = xm[p] - xt[p]
                     ddl = v[p] - vt[p]
                     hc = half_c[p]
-                    if hc.real > 0.0 and two_mid:
+                    if hc.real > 0.0:
                         # the contact's mean push over the kick's span, centred on its instant
                         ddl = ddl + 0.5 * h * (am[p] - at[p])
                         a0 = dl - hc - 0.5 * h * ddl
                         fc = (_contact_push(a0, ddl, kc[p], cdmp[p], h)
                               - _contact_push(-dl - hc + 0.5 * h * ddl, -ddl, kc[p], cdmp[p], h))
-                    elif hc.real > 0.0:
-                        fc = (_contact_push(dl - hc, ddl, kc[p], cdmp[p], h)
-                              - _contact_push(-dl - hc, -ddl, kc[p], cdmp[p], h))
-                    elif two_mid:
-                        fc = kc[p] * dl + cdmp[p] * (ddl + 0.5 * h * (am[p] - at[p]))
                     else:
-                        fc = kc[p] * dl + cdmp[p] * ddl
+                        fc = kc[p] * dl + cdmp[p] * (ddl + 0.5 * h * (am[p] - at[p]))
                     # (after a restart the velocities are at the restart's instant: a half kick)
                     hh = 0.5 * h if hk[p] else h
                     vn = v[p] + div(hh * (u - fc), mu[p])
                     mt = 1.0 - mu[p]
                     vtn = _friction_step(vt[p], fc, hh, mt, d0[p], d1[p], rs[p], on_st, vs[p])
-                    if two_mid:
-                        am[p] = div(vn - v[p], hh)
-                        at[p] = div(vtn - vt[p], hh)
-                        hk[p] = False
+                    am[p] = div(vn - v[p], hh)
+                    at[p] = div(vtn - vt[p], hh)
+                    hk[p] = False
                     v[p] = vn
                     vt[p] = vtn
                     xm[p] += h * vn
                     xt[p] += h * vtn
-                    if wind and two_mid:  # the integral by the midpoint of the feedback's move
+                    if wind:  # the integral by the midpoint of the feedback's move
                         ei[p] += h * (xrj + 0.5 * h * sr - xfb - 0.5 * h * (vn if fb_motor else vtn))
-                    elif wind:
-                        ei[p] += h * (xrj - xfb)
                     if wind_x[p]:
                         xw[p] += h * vn
                     continue
