@@ -303,11 +303,10 @@ def test_the_sub_steps_of_a_two_mass_gap_are_the_same_for_fits_and_scores():
         assert sim_substeps(s, Ts) == max(substeps(s.theta, Ts), contact)
 
 
-def test_the_contact_sub_steps_add_no_error_beyond_the_base_models_own(x_r):
-    """The contact is integrated for stability, not phase accuracy: against a 32-sub-step
-    reference, the gap model at its own sub-steps is off by no more than the same two-mass
-    drive without the gap is at the same sub-steps (the discretisation the two-mass variants
-    share; the single mass is stepped exactly, so its error is no yardstick for them)."""
+def test_at_the_contacts_own_sub_steps_the_gap_model_is_within_a_percent_of_what_the_gap_changes(x_r):
+    """The contact is integrated for stability, not phase accuracy (its stiffness stands for
+    "stiff"): at the sub-steps it sets, the gap model is within 1 % of what the gap changes
+    of a 64-sub-step reference."""
     from ident.diagnosis.spec import sim_substeps
 
     def run(spec, nsub):
@@ -324,10 +323,11 @@ def test_the_contact_sub_steps_add_no_error_beyond_the_base_models_own(x_r):
         s = base.with_effect("backlash", {"gap_mm": 0.02, "motor_fraction": 0.5}, mode)
         n = sim_substeps(s, Ts)
         assert n > sim_substeps(base, Ts) == 1
-        gap_err = np.sqrt(np.mean((run(s, n) - run(s, 32)) ** 2))
+        ref = run(s, 64)
         no_gap = base.with_effect("backlash", {"gap_mm": 0.0, "motor_fraction": 0.5}, mode)
-        base_err = np.sqrt(np.mean((run(no_gap, n) - run(no_gap, 32)) ** 2))
-        assert np.isfinite(gap_err) and gap_err <= 1.5 * base_err + 1e-5  # 10 nm: the reading floor
+        effect = np.sqrt(np.mean((ref - run(no_gap, 64)) ** 2))
+        err = np.sqrt(np.mean((run(s, n) - ref) ** 2))
+        assert effect > 1e-3 and np.isfinite(err) and err <= 1e-2 * effect
 
 
 def _actuation_delay_recording(x_r: np.ndarray, delay_s: float):

@@ -52,8 +52,7 @@ def _one(ch, freq_hz, mode, controller, nsub, friction, stribeck):
 @pytest.mark.parametrize("mode", [1, 2, 3])
 @pytest.mark.parametrize("freq_hz", [80.0, 150.0])
 def test_two_sub_steps_a_sample_give_the_run_of_sixty_four(freq_hz, mode, friction):
-    """Within 2 % of what the mode changes (the Euler step this replaced was 2–11 % off the
-    fine run at 16 sub-steps for a 150 Hz mode on these drives)."""
+    """Within 2 % of what the mode changes."""
     coarse, rigid = _run(freq_hz, mode, 1, 2, friction)
     fine, _ = _run(freq_hz, mode, 1, 64, friction)
     effect = np.sqrt(np.mean((fine - rigid) ** 2))
@@ -87,8 +86,7 @@ def test_a_stribeck_curve_on_the_table_is_first_order_in_the_sub_step():
 
 @pytest.mark.parametrize("freq_hz", [40.0, 150.0, 300.0])
 def test_the_filter_of_mode_0_at_two_sub_steps_is_the_run_of_sixty_four(freq_hz):
-    """Within 4 % of what the filter adds (Euler's step of it, at the 3–16 sub-steps its
-    frequency took, was 4–5 % off)."""
+    """Within 4 % of what the filter adds."""
     ch, _ = _chunk()
     theta = np.array(THETA, dtype=float)
     theta[6], theta[7] = FRICTION["gravity loaded"]
