@@ -38,8 +38,8 @@ __all__ = ["AxisModel", "BASE_KEYS", "EFFECT_NAMES", "CONTROLLERS"]
 # SPEC §7 effects an axis model can carry (external_force is described, never simulated),
 # in the order of the augmented simulator's flag vector.
 #: The control law's forms, in the order of the augmented simulator's controller slot
-#: (``modes[MODE_SLOTS["controller"]]``): eq. 3.3 as written, sampled and held, and sampled with the feed-forward
-#: differentiating the command causally.
+#: (``modes[MODE_SLOTS["controller"]]``): eq. 3.3 as written, sampled and held, and sampled
+#: with the feed-forward differentiating the command causally.
 CONTROLLERS = ("continuous", "sampled", "sampled_causal")
 
 

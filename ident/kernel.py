@@ -64,6 +64,16 @@ _GAP, _RATIO, _VS, _FREQ, _DAMPING, _GAIN, _DELAY, _PERIOD, _SIN, _COS, _LIMIT, 
                           "position_motor_share", "limit_slope"))
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _friction_level(d, v, rs, on_st, vs):
+    """Eq. 3.2's friction level ``d`` (signed, of the direction moved) at the speed ``v``:
+    Coulomb, or with ``on_st`` on the Stribeck curve ``d·(1 + (r − 1)·exp(−(v/v_s)²))``."""
+    if not on_st:
+        return d
+    q = div(v, vs)
+    return d * (1.0 + (rs - 1.0) * exp(-(q * q)))
+
+
 @njit(cache=True, nogil=True)
 def _friction_step(v: float, F: float, h: float, m: float, d0: float, d1: float, rs: float, on_st: bool,
                    vs: float) -> float:
@@ -77,9 +87,7 @@ def _friction_step(v: float, F: float, h: float, m: float, d0: float, d1: float,
     """
     rest = h
     if v.real != 0.0:
-        d = d0 if v.real > 0.0 else d1
-        q = div(v, vs)
-        lvl = d * (1.0 + (rs - 1.0) * exp(-(q * q))) if on_st else d
+        lvl = _friction_level(d0 if v.real > 0.0 else d1, v, rs, on_st, vs)
         vn = v + div(h * (F - lvl), m)
         if vn.real * v.real > 0.0:
             return vn
@@ -214,10 +222,7 @@ def _free_phase(z, x, vv, md, s, Ph, Ga, Gb, xa, ua, sr, suc, g, a1, a2, a3, d0,
                 x = x + acc * r * r / 6.0
                 md = 1 if Fb.real > up.real else -1
             return z, x, vv, md
-    lvl = d0 if md == 1 else d1
-    if on_st:
-        sq = div(vv, vs)
-        lvl = lvl * (1.0 + (rs - 1.0) * exp(-(sq * sq)))
+    lvl = _friction_level(d0 if md == 1 else d1, vv, rs, on_st, vs)
     gin = ua + g - lvl
     zn = Ph[0, 0] * z + Ph[0, 1] * x + Ph[0, 2] * vv + Ga[0, 0] * xa + Ga[0, 1] * gin + Gb[0, 0] * sr + Gb[0, 1] * suc
     xn = Ph[1, 0] * z + Ph[1, 1] * x + Ph[1, 2] * vv + Ga[1, 0] * xa + Ga[1, 1] * gin + Gb[1, 0] * sr + Gb[1, 1] * suc
@@ -539,11 +544,7 @@ def _two_mass_step(xm, vm, xt, vt, u, h, mu, kc, cd, C, d0, d1, rs, on_st, vs):
         whole = t.real == h.real
         if vt.real != 0.0 or broke:
             if vt.real != 0.0:
-                d = d0 if vt.real > 0.0 else d1
-                ff = d
-                if on_st:
-                    q = div(vt, vs)
-                    ff = d * (1.0 + (rs - 1.0) * exp(-(q * q)))
+                ff = _friction_level(d0 if vt.real > 0.0 else d1, vt, rs, on_st, vs)
             else:  # breaking away, at the level of the side of the stick band the spring force left
                 ff = lvl
             F = FR if whole else _pair_flow(C[8], C[9], t)
@@ -577,6 +578,19 @@ def _two_mass_step(xm, vm, xt, vt, u, h, mu, kc, cd, C, d0, d1, rs, on_st, vs):
         t = t - tau
         broke = True
     return xm, vm, xt, vt
+
+
+@njit(cache=True, nogil=True)
+def _exact_steps(flags, modes):
+    """Which of the kernel's steps are exact for the linear part: ``(exact, two_exact)`` —
+    the single mass on the continuous controller, and a two-mass mode (no gap) under the
+    sampled controller (:func:`_two_mass_step`).  A mode stepped exactly (``two_exact``, or
+    the filter of resonance mode 0 on the exact step) sets no sub-step
+    (:func:`ident.diagnosis.augmented.model_substeps`)."""
+    bl_loop = flags[_FL_BACKLASH] != 0 and modes[_MD_BACKLASH] >= 1
+    rs_two = flags[_FL_RESONANCE] != 0 and modes[_MD_RESONANCE] >= 1
+    sampled = modes[_MD_CONTROLLER] != 0
+    return not (bl_loop or rs_two) and not sampled, sampled and rs_two and not bl_loop
 
 
 @njit(cache=True, nogil=True)
@@ -723,11 +737,10 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     # of eq. 3.3's linear part over a sub-step, the Karnopp state (1 moving +, −1 moving −,
     # 0 stuck), the command drive at the sample and its slope, and whether any effect adds a
     # held input.
-    exact = not two and not sampled
+    exact, two_exact = _exact_steps(flags, modes)
     # A two-mass mode (no gap) under the sampled controller's held output: the sub-step is
     # exact for its linear part (:func:`_two_mass_step`), per set the flows of the free-free
     # mode and of the motor on the spring to a table held by friction.
-    two_exact = sampled and rs_two and not bl_loop
     two_mid = two and not two_exact
     # On the exact step the filter of resonance mode 0 on the recorded position is driven by
     # the mass's mean acceleration over each sub-step, held, and advanced by its flow — exact
@@ -795,10 +808,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         dir_[p] = 1 if vk.real > 0.0 else -1
                     lvl = 0.0
                     if vk.real != 0.0:
-                        lvl = d0[p] if vk.real > 0.0 else d1[p]
-                        if on_st:
-                            sv_ = div(vk, vs[p])
-                            lvl *= 1.0 + (rs[p] - 1.0) * exp(-(sv_ * sv_))
+                        lvl = _friction_level(d0[p] if vk.real > 0.0 else d1[p], vk, rs[p], on_st, vs[p])
                     u0 = ak + lvl
                     if cy_force:
                         u0 += cs[p] * sin(tw[p] * xm[p]) + cc[p] * cos(tw[p] * xm[p])
@@ -1010,16 +1020,13 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     continue
                 if two:
                     dl = xm[p] - xt[p]
-                    ddl = v[p] - vt[p]
+                    ddl = v[p] - vt[p] + 0.5 * h * (am[p] - at[p])  # at the kick's instant
                     hc = half_c[p]
-                    if hc.real > 0.0:
-                        # the contact's mean push over the kick's span, centred on its instant
-                        ddl = ddl + 0.5 * h * (am[p] - at[p])
-                        a0 = dl - hc - 0.5 * h * ddl
-                        fc = (_contact_push(a0, ddl, kc[p], cdmp[p], h)
+                    if hc.real > 0.0:  # the contact's mean push over the kick's span, centred on its instant
+                        fc = (_contact_push(dl - hc - 0.5 * h * ddl, ddl, kc[p], cdmp[p], h)
                               - _contact_push(-dl - hc + 0.5 * h * ddl, -ddl, kc[p], cdmp[p], h))
                     else:
-                        fc = kc[p] * dl + cdmp[p] * (ddl + 0.5 * h * (am[p] - at[p]))
+                        fc = kc[p] * dl + cdmp[p] * ddl
                     # (after a restart the velocities are at the restart's instant: a half kick)
                     hh = 0.5 * h if hk[p] else h
                     vn = v[p] + div(hh * (u - fc), mu[p])

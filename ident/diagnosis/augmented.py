@@ -117,8 +117,8 @@ import numpy as np
 
 from ident.axis_model import CONTROLLERS  # noqa: F401  (re-exported)
 from ident.kernel import (  # noqa: F401  (re-exported: the kernel's layout is this module's vocabulary)
-    _FL_BACKLASH, _FL_RESONANCE, _FREQ, _MD_BACKLASH, _MD_CONTROLLER, _MD_RESONANCE, CONTACT_DAMPING, CONTACT_HZ, EFFECTS,
-    EP_INDEX, MODE_SLOTS, N_EP, N_MODES, _many, _padded_modes, _runnable)
+    _FL_BACKLASH, _FL_RESONANCE, _FREQ, _MD_BACKLASH, _MD_RESONANCE, CONTACT_DAMPING, CONTACT_HZ, EFFECTS,
+    EP_INDEX, MODE_SLOTS, N_EP, N_MODES, _exact_steps, _many, _padded_modes, _runnable)
 
 __all__ = [
     "restart_sensitivities",
@@ -199,25 +199,21 @@ def model_substeps(theta: np.ndarray, Ts: float, flags: np.ndarray, ep: np.ndarr
     """Sub-steps per sample for the augmented model: :func:`substeps` with its fastest mode.
 
     A resonance's mode at 1.5 × its frequency (a damped mode's closed-loop poles sit above
-    the free one) — but where the kernel steps the mode exactly: a two-mass mode under the
-    sampled controller (:func:`ident.kernel._two_mass_step`) and the filter of mode 0 on the
-    continuous controller's exact step.  The stiff contact of a two-mass backlash variant (:data:`CONTACT_HZ`)
-    needs stability only, not phase accuracy: its frequency is a stand-in for "stiff", not
-    a fitted value, so its sub-step turns at most :data:`CONTACT_STEP_RAD`.
+    the free one) — but where the kernel steps the mode exactly
+    (:func:`ident.kernel._exact_steps`): a two-mass mode under the sampled controller and
+    the filter of mode 0 on the continuous controller's exact step.  The stiff contact of a
+    two-mass backlash variant (:data:`CONTACT_HZ`) needs stability only, not phase accuracy:
+    its frequency is a stand-in for "stiff", not a fitted value, so its sub-step turns at
+    most :data:`CONTACT_STEP_RAD`.
     """
     two_mode = flags[_FL_RESONANCE] and modes[_MD_RESONANCE] >= 1
     gap_two = flags[_FL_BACKLASH] and modes[_MD_BACKLASH] >= 1
-    # a two-mass mode under the sampled controller is stepped exactly (kernel._two_mass_step):
-    # its frequency sets no step
-    exact_mode = two_mode and modes[_MD_CONTROLLER] != 0 and not gap_two
-    # so is the filter of mode 0 on the continuous controller's exact step (a single mass)
-    exact_mode = exact_mode or (flags[_FL_RESONANCE] and not two_mode and not gap_two and modes[_MD_CONTROLLER] == 0)
-    f = ep[_FREQ] if flags[_FL_RESONANCE] and not exact_mode else 0.0
+    exact, two_exact = _exact_steps(np.asarray(flags, dtype=np.int64), _padded_modes(modes))
+    f = ep[_FREQ] if flags[_FL_RESONANCE] and not (two_exact or exact) else 0.0
     n = substeps(theta, Ts, 1.5 * f)
     if gap_two and not two_mode:
         n = max(n, math.ceil(Ts * 2.0 * math.pi * CONTACT_HZ / CONTACT_STEP_RAD))
     return n
-
 
 
 def simulate_augmented(
