@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["dot", "normal_products", "sum_squares", "solve"]
+__all__ = ["dot", "normal_products", "sum_squares", "solve", "weighted_rows"]
 
 #: Independent partial sums per dot product (combined in a fixed order): four keep the
 #: adder's pipeline busy without making the order depend on the machine.
@@ -68,6 +68,33 @@ def sum_squares(r: np.ndarray) -> float:
     """``rᵀr`` in a fixed order."""
     r = np.ascontiguousarray(r, dtype=np.float64)
     return float(_dot(r, r))
+
+
+@njit(cache=True, nogil=True)
+def _weighted_rows(Y, cols, x, w, out, diverged):
+    for p in range(Y.shape[0]):
+        for i in range(cols.size):
+            out[p, i] = w[i] * (Y[p, cols[i]] - x[i])
+        s = _dot(out[p], out[p])
+        if not np.isfinite(s):
+            out[p, :] = diverged
+
+
+def weighted_rows(Y: np.ndarray, cols: np.ndarray | None, x: np.ndarray, w: np.ndarray,
+                  diverged: float = 1e3) -> np.ndarray:
+    """Weighted residuals of simulations: row p is ``w·(Y[p, cols] − x)`` (``cols`` None: every
+    column, in place in ``Y``), and all ``diverged`` where its sum of squares is not finite
+    (a NaN, an inf or an overflow: a simulation that diverged).  One pass over each row, the
+    sum of squares in :func:`sum_squares`'s order."""
+    Y = np.asarray(Y)
+    if cols is None:
+        cols = np.arange(Y.shape[1])
+        out = Y
+    else:
+        out = np.empty((Y.shape[0], cols.size))
+    _weighted_rows(Y, cols, np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64),
+                   out, float(diverged))
+    return out
 
 
 @njit(cache=True, nogil=True)

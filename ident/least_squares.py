@@ -327,8 +327,9 @@ def _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many=None, jac
         for i, (j, h) in enumerate(zip(js, hs)):
             Z[i, j] += h
         R = resid_many(Z)
-        for i, (j, h) in enumerate(zip(js, hs)):
-            J[:, j] = (R[i] - r) / h
+        for i, (j, h) in enumerate(zip(js, hs)):  # (R[i] − r)/h, written into J's column
+            np.subtract(R[i], r, out=J[:, j])
+            J[:, j] /= h
 
     if not parallel or n < 2:
         columns(range(n))

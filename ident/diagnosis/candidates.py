@@ -45,6 +45,7 @@ from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS, cascade_motor_share, effect_parameters
 from ident.diagnosis.spec import (Chunk, ModelSpec, estimated_states, make_chunk, residual, residual_jacobian,
                                   restart_responses, sim_substeps, simulate_spec, sse)
+from ident.fixed_order import weighted_rows
 from ident.least_squares import bounded_lm, secant_lm
 
 if TYPE_CHECKING:
@@ -160,9 +161,9 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
     nsub = sim_substeps(spec, chunk.Ts)
     m = chunk.score
-    sel = slice(None) if m.all() else np.flatnonzero(m)  # a slice takes no copy
-    w = chunk.w[sel]
-    x_m = chunk.x[sel]
+    cols = None if m.all() else np.flatnonzero(m)  # None: every sample, weighted in place
+    w = chunk.w if cols is None else chunk.w[cols]
+    x_m = chunk.x if cols is None else chunk.x[cols]
     flags = spec.flags()
 
     def unpack_many(Z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # the parameter sets of the rows of Z
@@ -187,13 +188,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     restarts = restart_responses(spec, chunk)
 
     def weighted(y: np.ndarray) -> np.ndarray:
-        with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
-            r = y[sel]  # in place: y is the simulation's own array, not read again
-            np.subtract(r, x_m, out=r)
-            np.multiply(w, r, out=r)
-            if not np.isfinite(r @ r):  # a NaN, an inf or an overflow: a diverged simulation
-                return np.full(r.size, 1e3)
-        return r
+        # in place where every sample is scored: y is the simulation's own array, not read again
+        return weighted_rows(y[None, :], cols, x_m, w)[0]
 
     def resid(z: np.ndarray) -> np.ndarray:
         th, ep = unpack(z)
@@ -205,15 +201,10 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         TH, EP = unpack_many(Z)
         Y = simulate_augmented_many(chunk.x_r, chunk.x, chunk.Ts, TH, EP, flags=flags, modes=spec.modes,
                                     starts=chunk.starts, derivs=chunk.derivs, nsub=nsub, warm=chunk.warm)
-        with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
-            # element by element as weighted() does, in place (Y is this call's own array)
-            R = Y[:, sel]  # a view (sel a slice) or a copy (an index array): Y is not read again
-            np.subtract(R, x_m, out=R)
-            np.multiply(w, R, out=R)
-            for r, ep in zip(R, EP):
-                if not np.isfinite(r @ r):
-                    r[:] = 1e3
-                if restarts is not None:  # estimated_states returns r itself otherwise
+        R = weighted_rows(Y, cols, x_m, w)  # element by element as weighted() does
+        if restarts is not None:  # estimated_states returns r itself otherwise
+            with np.errstate(all="ignore"):  # also in a helper thread (numpy's error state is per thread)
+                for r, ep in zip(R, EP):
                     r[:] = estimated_states(r, spec.effects, ep, spec.modes, chunk, restarts)
         return R
 
