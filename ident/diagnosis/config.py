@@ -99,8 +99,8 @@ class DiagnosisConfig:
     #: purpose: with the base held a large gap or a low mode costs more than a small one
     #: even where it is the truth, so a tight screen would rank away the right start (a
     #: two-mass mode's valley is narrow in frequency and motor share: with 16, a 45 Hz PID
-    #: mode's start was screened out and a 5 ms delay named instead; 32 costs ~10 % of the
-    #: diagnosis time — independent bench tuning seeds 42 → 44/69, no verdict lost) …
+    #: mode's start was screened out and a 5 ms delay named instead; with 24, independent
+    #: bench tuning seed 1044.2's 37 Hz PID mode) …
     screened_starts: int = 32
     #: The race of the surviving starts (successive halving over the share of the
     #: recording fitted, a multi-fidelity race): round i fits every start still in the race
@@ -110,8 +110,14 @@ class DiagnosisConfig:
     #: back from the valley where it absorbed the effect before starts are compared (after
     #: two iterations a large gap still costs more than a small one even where it is the
     #: truth: LinuxCNC 20 µm gap); a quarter of each segment still holds dozens of moves.
+    #: The last round only ranks the few starts left (the best of each variant) for the
+    #: polish, which fits the winner on every sample right after (``joint_iter``), and its
+    #: bases have moved back in the rounds before: 4 iterations there named on the tuning
+    #: sets what 8 did or more (drive-zoo-dev 20/21 and drive-zoo-dev2 27/28 both ways; the
+    #: independent bench's tuning seeds 66/70 against 64/70, no false alarm either way) at
+    #: 0.90× the diagnosis time (bench_diagnosis_speed.py).
     race_fidelity: tuple[float, ...] = (0.25, 0.5, 1.0)
-    race_iter: tuple[int, ...] = (8, 8, 8)
+    race_iter: tuple[int, ...] = (8, 8, 4)
     #: When > 0: "the whole" is at most this many seconds of the recording, in windows
     #: spread over all of it (:meth:`~ident.diagnosis.spec.Chunk.windows`: each restarts
     #: mid-move on the recorded state, a short lead-in unscored), and only the winner's
