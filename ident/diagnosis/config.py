@@ -110,14 +110,12 @@ class DiagnosisConfig:
     #: back from the valley where it absorbed the effect before starts are compared (after
     #: two iterations a large gap still costs more than a small one even where it is the
     #: truth: LinuxCNC 20 µm gap); a quarter of each segment still holds dozens of moves.
-    #: The last round only ranks the few starts left (the best of each variant) for the
-    #: polish, which fits the winner on every sample right after (``joint_iter``), and its
-    #: bases have moved back in the rounds before: 4 iterations there named on the tuning
-    #: sets what 8 did or more (drive-zoo-dev 20/21 and drive-zoo-dev2 27/28 both ways; the
-    #: independent bench's tuning seeds 66/70 against 64/70, no false alarm either way) at
-    #: 0.90× the diagnosis time (bench_diagnosis_speed.py).
+    #: The last round ranks the best start of each variant against the others, and a
+    #: variant's valley shows only once the base has moved into it: with 4 iterations there
+    #: a wound-up integral lost to the frozen one (tests/test_diagnosis_saturation.py), though
+    #: the tuning sets named as many.
     race_fidelity: tuple[float, ...] = (0.25, 0.5, 1.0)
-    race_iter: tuple[int, ...] = (8, 8, 4)
+    race_iter: tuple[int, ...] = (8, 8, 8)
     #: When > 0: "the whole" is at most this many seconds of the recording, in windows
     #: spread over all of it (:meth:`~ident.diagnosis.spec.Chunk.windows`: each restarts
     #: mid-move on the recorded state, a short lead-in unscored), and only the winner's
