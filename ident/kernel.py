@@ -630,12 +630,15 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     idles on latencies; the sets' chains are independent and interleave (about twice the
     simulations per second for 6–12 sets on the Euler step).  ``load`` (N,), mm/s²: an
     external acceleration linear between samples (exact step only: the identification's
-    disturbance input); ``start_rule`` 1: segments start as :mod:`ident.simulation` starts
+    disturbance input; empty: none); ``warm`` (N,) the warm restarts' mask with their ``vw``,
+    ``aw`` (empty: none); ``start_rule`` 1: segments start as :mod:`ident.simulation` starts
     them (integral at zero, ẋ = ẋ_r) instead of at rest.
     """
     P = TH.shape[0]
     n = xr.size
     want_u = OUT_U.shape[1] == n
+    has_load = load.size == n  # none given: an empty array, read as zero
+    has_warm = warm.size == n  # no warm restarts: an empty mask
     h = Ts / nsub
     on_bl = flags[_FL_BACKLASH] != 0
     on_st = flags[_FL_STRIBECK] != 0
@@ -794,7 +797,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                 vb[p] = 0.0
                 vb_prev[p] = 0.0
                 u0 = 0.0
-                if warm[k]:
+                if has_warm and warm[k]:
                     vk = vw[k]
                     ak = aw[k]
                     # a velocity of exactly 0 is a restart at rest: ak is then the force
@@ -879,8 +882,9 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
             # A set's sub-steps run one after the other with its state in registers (the lockstep
             # over sets is per sample here): the chain of one sub-step is short.
             for p in range(P):
-                uck = b0[p] * ar[k] + b1[p] * vr[k] + b2[p] * xr[k] + load[k]
-                suc = (b0[p] * ar[k + 1] + b1[p] * vr[k + 1] + b2[p] * xr[k + 1] + load[k + 1] - uck) / Ts
+                uck = b0[p] * ar[k] + b1[p] * vr[k] + b2[p] * xr[k] + (load[k] if has_load else 0.0)
+                suc = (b0[p] * ar[k + 1] + b1[p] * vr[k + 1] + b2[p] * xr[k + 1] + (load[k + 1] if has_load else 0.0)
+                       - uck) / Ts
                 z = ei[p]
                 x = xm[p]
                 vv = v[p]
@@ -980,7 +984,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                             if not starts[k]:
                                 vb[p] = (xr[k] - xr[k - 1]) / Ts
                             else:
-                                vb[p] = vr[k] - 0.5 * ar[k] * Ts if warm[k] else 0.0
+                                vb[p] = vr[k] - 0.5 * ar[k] * Ts if has_warm and warm[k] else 0.0
                             uh = div(b0[p] * (vb[p] - vb_prev[p]), Ts) + b1[p] * vb[p]
                         else:
                             uh = b0[p] * ar[k] + b1[p] * vr[k]
@@ -1109,7 +1113,7 @@ def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, w
                      np.ascontiguousarray(x0, dtype=dtype), np.ascontiguousarray(starts, dtype=np.bool_),
                      *_warm_arrays(warm, n, dtype), float(Ts), int(nsub), np.ascontiguousarray(TH[ok]),
                      np.ascontiguousarray(flags, dtype=np.int64), np.ascontiguousarray(E[ok]), _padded_modes(modes),
-                     y, out_u, np.zeros(n) if load is None else np.ascontiguousarray(load, dtype=float),
+                     y, out_u, np.zeros(0) if load is None else np.ascontiguousarray(load, dtype=float),
                      int(start_rule))
         if u_out is not None:
             u_out[:] = out_u[0]
@@ -1125,8 +1129,8 @@ def _warm_arrays(warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None, n: int,
     """The kernel's (mask, v, a) of warm restarts, v and a of the run's number type (a
     complex run differentiates the restart state too): none when ``warm`` is None (v, a
     never read then)."""
-    if warm is None:
-        unused = np.zeros(n, dtype=dtype)
-        return np.zeros(n, dtype=np.bool_), unused, unused
+    if warm is None:  # empty arrays: the kernel reads no warm restart
+        unused = np.zeros(0, dtype=dtype)
+        return np.zeros(0, dtype=np.bool_), unused, unused
     return (np.ascontiguousarray(warm[0], dtype=np.bool_), np.ascontiguousarray(warm[1], dtype=dtype),
             np.ascontiguousarray(warm[2], dtype=dtype))
