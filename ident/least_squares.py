@@ -303,9 +303,9 @@ def _jacobian(resid, z, r, h0, ub, relative_step, parallel, resid_many=None, jac
     take in turn from a shared counter, so the caller never waits for a helper that has not
     started (on a busy machine the caller then takes both groups itself).  Each column is
     the same computation whichever thread makes it, so J is the same bit for bit.  Why
-    threads here: the searches of the diagnosis run side by side in two workers, but their
-    lengths differ, and a worker left alone (the last search, a base re-fit, the
-    re-estimation) would otherwise leave the second core idle.
+    threads here: a fit that runs alone (the diagnosis's base and reference re-fits, its
+    re-estimation) would otherwise leave the second core idle; the diagnosis's searches,
+    which run side by side in two workers already, do not split theirs.
     """
     n = z.size
     J = np.empty((r.size, n), order="F")

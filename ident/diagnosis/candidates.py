@@ -96,7 +96,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     fitted by its logarithm.  ``secant_nfev`` > 0:
     the secant Levenberg–Marquardt (:func:`ident.least_squares.secant_lm`) with that many
     simulations instead, no polish.  ``search``: a fit of an effect's search (the race and its
-    polish), for ``cfg.fit_beta``.  Returns the fitted copy; a fit that fails to improve
+    polish), for ``cfg.fit_beta``, whose Jacobian is taken in its own thread.  Returns the
+    fitted copy; a fit that fails to improve
     returns ``spec``.
     """
     if fd_step is None:
@@ -226,9 +227,13 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
 
     def how(h: float) -> dict:  # the Jacobian of a fit at difference step h
         exact = (cfg.exact_fine if h <= cfg.fd_step else cfg.exact_rough) and not rough
-        # the columns simulated together, in two threads (the kernel runs outside the GIL;
-        # ident.least_squares._jacobian): the same result, sooner
-        return dict(parallel=True, resid_many=resid_many, step=steps(h), jac=jac if exact else None)
+        # the columns simulated together (one lockstep run), and split over two threads
+        # (ident.least_squares._jacobian; the kernel runs outside the GIL) only outside a
+        # search: the searches run side by side in the diagnosis's two workers, and a split
+        # there puts three or four threads on two cores and halves the sets a lockstep run
+        # interleaves (bench_diagnosis_speed.py: 0.89x the time unsplit).  The base, reference
+        # and final fits may run alone and split theirs.  The same result either way.
+        return dict(parallel=not search, resid_many=resid_many, step=steps(h), jac=jac if exact else None)
 
     with np.errstate(all="ignore"):  # diverging trial steps are expected and rejected
         if secant_nfev > 0:
