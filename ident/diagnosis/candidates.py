@@ -231,7 +231,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         # (ident.least_squares._jacobian; the kernel runs outside the GIL) only outside a
         # search: the searches run side by side in the diagnosis's two workers, and a split
         # there puts three or four threads on two cores and halves the sets a lockstep run
-        # interleaves (bench_diagnosis_speed.py: 0.89x the time unsplit).  The base, reference
+        # interleaves (bench_diagnosis_speed.py: 0.95x the time unsplit).  The base, reference
         # and final fits may run alone and split theirs.  The same result either way.
         return dict(parallel=not search, resid_many=resid_many, step=steps(h), jac=jac if exact else None)
 
