@@ -77,7 +77,7 @@ def _friction_level(d, v, rs, on_st, vs):
     q = div(v, vs)
     q2 = q * q
     if q2.real > 80.0:  # (r − 1)·e^(−q²) below the rounding of 1 (r < 1e18): the Coulomb level, bit for bit
-        return d + 0.0 * q2
+        return d * (1.0 + 0.0 * q2)
     return d * (1.0 + (rs - 1.0) * exp(-q2))
 
 
@@ -1103,6 +1103,8 @@ def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, w
     does (:mod:`ident.simulation`: z = 0, ẋ = ẋ_r)."""
     x_r = np.ascontiguousarray(x_r, dtype=float)
     n = x_r.size
+    if load is not None and np.shape(load) != (n,):  # the kernel reads an empty load as none
+        raise ValueError(f"load has shape {np.shape(load)}, the command {n} samples")
     TH = np.ascontiguousarray(thetas, dtype=dtype).reshape(-1, 8)
     E = np.ascontiguousarray(eps, dtype=dtype).reshape(-1, N_EP)
     ok = _runnable(TH, E)

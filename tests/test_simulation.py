@@ -140,6 +140,8 @@ def test_bad_arguments_are_rejected():
         simulate(m, np.zeros(10), 0.0)
     with pytest.raises(TypeError, match="a1, a2"):
         simulate(object(), np.zeros(10), TS)
+    with pytest.raises(ValueError, match="load has shape"):
+        simulate(m, np.zeros(10), TS, disturbance=np.zeros(9))
 
 
 def test_a_load_enters_where_the_command_drive_does():
