@@ -23,8 +23,10 @@ Ts = 0.001
 THETA = np.array([372.76, 62009.83, 1527104.87, 0.0, 0.0, 11106.33, 441.0, -302.0])
 
 
-def point_to_point(seed: int, T: float = 3.0, span: float = 5.0, v_max: float = 100.0, a_max: float = 2000.0) -> np.ndarray:
-    """A random trapezoidal point-to-point command, mm, sampled every Ts."""
+def point_to_point(seed: int, T: float = 3.0, span: float = 5.0, v_max: float = 100.0, a_max: float = 2000.0,
+                   dwell: tuple[int, int] = (5, 40)) -> np.ndarray:
+    """A random trapezoidal point-to-point command, mm, sampled every Ts, dwelling ``dwell``
+    samples (low, high) at each target."""
     rng = np.random.default_rng(seed)
     n = int(T / Ts)
     out = np.zeros(n)
@@ -43,9 +45,9 @@ def point_to_point(seed: int, T: float = 3.0, span: float = 5.0, v_max: float = 
         e = min(n, k + seg.size)
         out[k:e] = seg[: e - k]
         k, x = e, tgt
-        dwell = int(rng.integers(5, 40))
-        out[k : k + dwell] = x
-        k += dwell
+        stay = int(rng.integers(*dwell))
+        out[k : k + stay] = x
+        k += stay
     return out
 
 

@@ -7,10 +7,14 @@ the window reproduces the recording as the simulation of the whole does.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from ident.diagnosis.augmented import EP_INDEX, N_EP, N_MODES, segment_starts, simulate_augmented
+from ident.diagnosis.candidates import race_part
+from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.spec import ModelSpec, make_chunk, simulate_spec
 from test_diagnosis_units import point_to_point
 
@@ -84,3 +88,59 @@ def test_windows_spread_over_the_whole_recording_and_hold_the_seconds_asked(x_r)
 def test_a_chunk_no_longer_than_the_windows_is_its_own_window(x_r):
     chunk, _ = recorded(x_r, None, {}, [0, 0, 0, 0, 1])
     assert chunk.windows(20.0) is chunk
+
+
+@pytest.fixture(scope="module")
+def x_r_dwelling() -> np.ndarray:
+    # 12 s of faster moves with dwells of 60-300 ms: rests a recording shows
+    return point_to_point(7, T=12.0, span=10.0, v_max=200.0, a_max=8000.0, dwell=(60, 300))
+
+
+def encoder(chunk):
+    """The chunk as a 0.1 µm encoder records it (a rest is then a position that does not change)."""
+    return make_chunk(chunk.x_r, np.round(chunk.x / 1e-4) * 1e-4, Ts, chunk.starts)
+
+
+def test_a_window_restarted_at_rest_reproduces_a_wound_up_integral_a_mid_move_restart_misreads(x_r_dwelling):
+    # an integral winding up while the output is clipped is a state no recording shows
+    # mid-move; at a rest it is known (wound up beyond what friction holds, it would move the axis)
+    chunk, spec = recorded(x_r_dwelling, "saturation", {"limit": 3000.0}, [0, 0, 0, 0, 1, 1])
+    chunk = encoder(chunk)
+
+    def miss(win):
+        return (np.linalg.norm((simulate_spec(spec, win) - win.x)[win.score])
+                / np.linalg.norm((win.x_r - win.x)[win.score]))
+
+    assert miss(chunk.rest_windows(4.0, 1.0, 0.05)) < 0.01
+    assert miss(chunk.windows(4.0)) > 0.3
+
+
+def test_rest_windows_restart_only_where_the_axis_rests_and_score_every_sample(x_r_dwelling):
+    chunk, _ = recorded(x_r_dwelling, None, {}, [0, 0, 0, 0, 1])
+    chunk = encoder(chunk)
+    chunk = replace(chunk, w=1.0 + np.arange(chunk.n))  # a weight that tells each sample's index
+    win = chunk.rest_windows(4.0, window_s=1.0, rest_s=0.05)
+    rests = chunk.rests(0.05)
+    # the windows' restarts: segment starts, or rests of the recording at velocity 0
+    kept = (win.w - 1.0).astype(int)
+    assert np.all(np.diff(kept) > 0)
+    assert win.starts.sum() >= 3
+    for k in kept[win.starts]:
+        assert rests.starts[k]
+    assert np.all(win.warm[1][win.warm[0]] == 0.0)
+    assert np.array_equal(win.score, chunk.score[kept])  # nothing misread at a rest: no lead-in
+    # about the seconds asked (a window may end early at its segment's end), far from all of it
+    assert 3.0 <= win.n * Ts and win.n < 0.5 * chunk.n
+    # the race of a model a restart mid-move misreads runs on them
+    cfg = DiagnosisConfig(race_seconds=6.0, race_window_s=1.0, rest_restart_s=0.05)
+    for frac in (0.5, 1.0):
+        raced, rested = race_part(chunk, frac, cfg, restart=False), chunk.rest_windows(6.0 * frac, 1.0, 0.05)
+        assert np.array_equal(raced.w, rested.w) and np.array_equal(raced.starts, rested.starts)
+
+
+def test_a_recording_without_a_rest_has_no_rest_windows_and_is_raced_on_the_first_part_of_each_segment(x_r):
+    chunk, _ = recorded(x_r, None, {}, [0, 0, 0, 0, 1])  # dwells of 5-40 ms: no rest of 50 ms
+    chunk = encoder(chunk)
+    assert chunk.rest_windows(4.0, 1.0, 0.05) is None
+    raced = race_part(chunk, 0.5, DiagnosisConfig(race_seconds=4.0), restart=False)
+    assert raced.n == chunk.part(0.5).n

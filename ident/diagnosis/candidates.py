@@ -324,16 +324,23 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
 
 def race_part(chunk: Chunk, frac: float, cfg: DiagnosisConfig, restart: bool = True) -> Chunk:
     """What a race round at fidelity ``frac`` fits on: ``frac`` × ``cfg.race_seconds`` of
-    windows spread over the whole recording (warm restarts), or the first ``frac`` of every
-    segment (:meth:`Chunk.part`; all of it at 1).
+    windows spread over the whole recording, or the first ``frac`` of every segment
+    (:meth:`Chunk.part`; all of it at 1).
 
-    Windows only where they cut the work at least in half: on a recording barely longer
-    than race_seconds they cost what it costs and only add restarts (a 6.8 s LinuxCNC
-    capture lost its 20 µm gap to them); and only for models whose state a restart can
-    read from the recording (``restart``, :attr:`Effect.restartable`).
+    The windows restart mid-move on the recorded state (:meth:`Chunk.windows`) for models
+    whose state a restart can read from the recording (``restart``,
+    :attr:`Effect.restartable`), else at rests (:meth:`Chunk.rest_windows`); a recording
+    without a rest the recording shows is raced on :meth:`Chunk.part`.  Windows only where
+    they cut the work at least in half: on a recording barely longer than race_seconds
+    they cost what it costs and only add restarts (a 6.8 s LinuxCNC capture lost its 20 µm
+    gap to them).
     """
-    if restart and 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts:
-        return chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
+    if 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts:
+        if restart:
+            return chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
+        rested = chunk.rest_windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.rest_restart_s)
+        if rested is not None:
+            return rested
     return chunk.part(frac)
 
 

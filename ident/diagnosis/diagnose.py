@@ -864,8 +864,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
         return search(base_sc.specs[i], eff, tr, loc, cfg, others=(other,))
 
     # the longest searches first, so both threads end together: a two-mass model's (more
-    # states and variants) and one raced on whole segments (not restartable: its race
-    # cannot take windows of the recording)
+    # states and variants) and one not restartable mid-move (raced on windows from rests,
+    # or on whole segments where the recording shows none)
     heavy_first = sorted(effects, key=lambda e: not (EFFECT_MODELS[e].two_mass or not EFFECT_MODELS[e].restartable))
     jobs = {(eff, i): pool.submit(fit_one, eff, i, tr) for eff in heavy_first for i, (tr, _te) in enumerate(folds)}
     say(f"fitting {len(effects)} effects")

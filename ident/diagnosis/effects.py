@@ -95,8 +95,10 @@ class Effect:
     #: so the diagnosis's two worker threads end together
     two_mass: bool = False
     #: the model's whole state can be read from the recording at a restart mid-move
-    #: (:meth:`~ident.diagnosis.spec.Chunk.windows`): its search may race on windows
-    #: (one that races on whole segments is among the longest: started with the two-mass ones)
+    #: (:meth:`~ident.diagnosis.spec.Chunk.windows`): its search may race on such windows;
+    #: one that is not races on windows restarted at rests
+    #: (:meth:`~ident.diagnosis.spec.Chunk.rest_windows`), or on whole segments where the
+    #: recording shows no rest (then among the longest: started with the two-mass ones)
     restartable: bool = True
 
     def free(self, spec: ModelSpec) -> list[str]:
@@ -606,12 +608,13 @@ class Saturation(Effect):
 
     name = REGISTRY["saturation"].name
     added = 2
-    #: an integral wound up while the output is clipped is a state no recording shows: a
-    #: window restarted mid-move sets it to hold the recorded acceleration, so the variant
-    #: without anti-windup ties with the frozen one there and loses the race it would win
-    #: in free run (drive-zoo-dev2 case_003: 0.085 against 0.037 of the base's cost after
-    #: the race on windows, 0.001 against 0.003 fitted in free run); its search races on
-    #: the first part of every segment from rest instead
+    #: an integral wound up while the output is clipped is a state no recording shows
+    #: mid-move: a window restarted mid-move sets it to hold the recorded acceleration, so
+    #: the variant without anti-windup ties with the frozen one there and loses the race it
+    #: would win in free run (drive-zoo-dev2 case_003: 0.085 against 0.037 of the base's
+    #: cost after the race on windows, 0.001 against 0.003 fitted in free run).  At a rest
+    #: it is known (wound up beyond what friction holds, it would move the axis): its
+    #: search races on windows restarted at rests (tests/test_diagnosis_windows.py)
     restartable = False
     #: 1/s: a slope started at 0 moves by steps of this scale; a viscous share of 1/s
     #: tilts the limit by 0.1 % of a 1000 mm/s² limit per mm/s

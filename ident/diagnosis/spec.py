@@ -116,26 +116,14 @@ class Chunk:
         segment's start restarts there at rest, as the whole chunk does.  Returns the chunk
         itself when it is no longer than ``seconds``.
         """
-        n_need = int(round(seconds / self.Ts))
-        cum = np.cumsum(self.score)
-        if self.n <= n_need or cum[-1] == 0:
+        plan = self._window_plan(seconds, window_s)
+        if plan is None:
             return self
-        m = max(1, int(round(seconds / window_s)))
-        length = max(n_need // m, 1)
+        firsts, length = plan
         lead = int(round(lead_s / self.Ts))
-        seg_starts = np.flatnonzero(self.starts)
-        seg_ends = np.append(seg_starts[1:], self.n)
-        keep = np.zeros(self.n, dtype=bool)
-        starts = np.zeros(self.n, dtype=bool)
-        warm = np.zeros(self.n, dtype=bool)
-        vw, aw = np.zeros(self.n), np.zeros(self.n)
-        if self.warm is not None:
-            warm[:], vw[:], aw[:] = self.warm
+        keep, starts, (warm, vw, aw) = self._no_windows()
         score = np.zeros(self.n, dtype=bool)
-        for i in range(m):
-            a = int(np.searchsorted(cum, i * cum[-1] / m + 1))  # first scored sample of window i
-            j = int(np.searchsorted(seg_starts, a, side="right")) - 1
-            lo, hi = int(seg_starts[j]), int(seg_ends[j])
+        for a, lo, hi in firsts:
             b = min(a + length, hi)
             r = lo  # reaches back to the segment's start: restart there, at rest
             if a - lead - _HALF > lo:  # restart mid-move where the recorded state is read best
@@ -148,6 +136,44 @@ class Chunk:
             keep[r:b] = True
             starts[r] = True
         return self._take(keep, starts, score, (warm, vw, aw))
+
+    def rest_windows(self, seconds: float, window_s: float = 1.0, rest_s: float = 0.05) -> "Chunk | None":
+        """About ``seconds`` of the chunk in windows spread over all of it, as :meth:`windows`,
+        but each restarting where the axis rests: at its segment's start or at the end of a
+        dwell of the command at least ``rest_s`` long where the recording shows the axis at
+        rest (the restarts of :meth:`rests`, velocity 0).
+
+        For a model with a state no recording shows mid-move — an integral wound up while
+        the output is clipped — a window restarted mid-move misreads it, but at a rest it is
+        known: an integral wound up beyond the force friction holds would move the axis.
+        Window i runs from the last rest at or before the first sample :meth:`windows`
+        would score (the i/m point of the scored samples) to ``window_s`` past that sample,
+        within its segment; windows that overlap join.  Every sample of a window is scored
+        (a rest has no lead-in to settle).  None when the chunk holds no such dwell (the
+        caller races on :meth:`part` then); the chunk itself when it is no longer than
+        ``seconds``.
+        """
+        plan = self._window_plan(seconds, window_s)
+        if plan is None:
+            return self
+        rested = self.rests(rest_s)
+        if rested is None:
+            return None
+        firsts, length = plan
+        points = np.flatnonzero(rested.starts)  # segment starts and rests, sorted
+        keep, starts, (warm, vw, aw) = self._no_windows()
+        rest_warm = rested.warm[0]
+        end = -1
+        for a, _lo, hi in firsts:
+            r = int(points[int(np.searchsorted(points, a, side="right")) - 1])  # ≥ the segment's start
+            b = min(a + length, hi)
+            if r > end or self.starts[r]:  # a new window: the simulation restarts at the rest
+                starts[r] = True
+                if rest_warm[r]:
+                    warm[r], vw[r], aw[r] = True, 0.0, 0.0
+            keep[r:b] = True
+            end = max(end, b)
+        return self._take(keep, starts, self.score, (warm, vw, aw))
 
     def shots(self, window_s: float, lead_s: float = 0.1) -> "Chunk":
         """Every scored sample of the chunk in short windows, each simulated from the recorded
@@ -238,6 +264,34 @@ class Chunk:
             return None
         return replace(self, starts=starts, warm=(added, np.zeros(self.n), np.zeros(self.n)),
                        estimate_states=False)
+
+    def _window_plan(self, seconds: float, window_s: float) -> tuple[list[tuple[int, int, int]], int] | None:
+        """Where the ``round(seconds / window_s)`` windows (at least one) of :meth:`windows`
+        and :meth:`rest_windows` begin: for the i-th of m, the first sample after i/m of the
+        scored samples, with the bounds of its segment (first, last + 1); and their length
+        in samples.  None when the chunk is no longer than ``seconds`` or scores nothing."""
+        n_need = int(round(seconds / self.Ts))
+        cum = np.cumsum(self.score)
+        if self.n <= n_need or cum[-1] == 0:
+            return None
+        m = max(1, int(round(seconds / window_s)))
+        seg_starts = np.flatnonzero(self.starts)
+        seg_ends = np.append(seg_starts[1:], self.n)
+        firsts = []
+        for i in range(m):
+            a = int(np.searchsorted(cum, i * cum[-1] / m + 1))  # first scored sample of window i
+            j = int(np.searchsorted(seg_starts, a, side="right")) - 1
+            firsts.append((a, int(seg_starts[j]), int(seg_ends[j])))
+        return firsts, max(n_need // m, 1)
+
+    def _no_windows(self) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Empty masks of kept samples and restarts, and the chunk's own warm restarts
+        (mask, v, a) as new arrays: what :meth:`windows` and :meth:`rest_windows` fill."""
+        warm = np.zeros(self.n, dtype=bool)
+        vw, aw = np.zeros(self.n), np.zeros(self.n)
+        if self.warm is not None:
+            warm[:], vw[:], aw[:] = self.warm
+        return np.zeros(self.n, dtype=bool), np.zeros(self.n, dtype=bool), (warm, vw, aw)
 
     def _take(self, keep: np.ndarray, starts: np.ndarray, score: np.ndarray,
               warm: tuple[np.ndarray, np.ndarray, np.ndarray] | None) -> "Chunk":
