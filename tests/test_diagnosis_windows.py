@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ident.diagnosis.augmented import EP_INDEX, N_EP, N_MODES, segment_starts, simulate_augmented
-from ident.diagnosis.candidates import race_part
+from ident.diagnosis.candidates import held_force, race_part
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.spec import ModelSpec, make_chunk, simulate_spec
 from test_diagnosis_units import point_to_point
@@ -144,3 +144,19 @@ def test_a_recording_without_a_rest_has_no_rest_windows_and_is_raced_on_the_firs
     assert chunk.rest_windows(4.0, 1.0, 0.05) is None
     raced = race_part(chunk, 0.5, DiagnosisConfig(race_seconds=4.0), restart=False)
     assert raced.n == chunk.part(0.5).n
+
+
+@pytest.mark.parametrize("drive", ["sampled loop", "Stribeck friction", "capture delay"])
+def test_a_rest_window_restarts_holding_the_force_the_model_holds_there(x_r_dwelling, drive):
+    # at a rest the integral holds a force friction balances: the model's own (its free
+    # run's u there) restarts the window on the model's state, where none misreads it
+    chunk, spec = recorded(x_r_dwelling, *DRIVES[drive])
+    chunk = encoder(chunk)
+
+    def miss(win):
+        return (np.linalg.norm((simulate_spec(spec, win) - win.x)[win.score])
+                / np.linalg.norm((win.x_r - win.x)[win.score]))
+
+    held = miss(chunk.rest_windows(4.0, 1.0, 0.05, held=held_force(spec, chunk)))
+    assert held < 0.002
+    assert miss(chunk.rest_windows(4.0, 1.0, 0.05)) > 10 * held

@@ -53,8 +53,8 @@ if TYPE_CHECKING:
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
            "sampled_base", "refit_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
-           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part", "shoot",
-           "polish", "segment_variance_fit", "profile_gap", "rippled"]
+           "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part",
+           "held_force", "shoot", "polish", "segment_variance_fit", "profile_gap", "rippled"]
 
 
 def rippled(spec: ModelSpec) -> bool:
@@ -300,7 +300,8 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     # 2. screen: free-run cost with the base held (diverging starts drop out), on what the
     # race's last round sees
     restart = EFFECT_MODELS[effect].restartable
-    look = race_part(chunk, 1.0, cfg, restart)
+    held = None if restart else held_force(base, chunk)
+    look = race_part(chunk, 1.0, cfg, restart, held)
     costs = [sse(s, look) for s in starts]
     alive = [starts[i] for i in _best_per_variant(starts, costs, cfg.screened_starts)]
     if not alive:
@@ -308,7 +309,7 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     # 3. race: joint fits on a growing share of race_seconds of the recording (of all of it
     # when 0), the worse half dropped after each round
     for r, (frac, it) in enumerate(zip(cfg.race_fidelity, cfg.race_iter)):
-        part = race_part(chunk, frac, cfg, restart)
+        part = race_part(chunk, frac, cfg, restart, held)
         nfev = cfg.race_evals[r] if cfg.race_evals else 0
         alive = [fit_spec(s, part, max_iter=it, fd_step=cfg.fd_step_rough, polish=False, secant_nfev=nfev,
                           search=True, cfg=cfg)
@@ -322,23 +323,35 @@ def search(base: ModelSpec, effect: str, chunk: Chunk, evidence: dict,
     return EFFECT_MODELS[effect].finish(best, chunk, cfg)
 
 
-def race_part(chunk: Chunk, frac: float, cfg: DiagnosisConfig, restart: bool = True) -> Chunk:
+def held_force(base: ModelSpec, chunk: Chunk) -> np.ndarray:
+    """The control-equivalent acceleration u (mm/s²) ``base`` applies at each sample of its
+    free run on ``chunk`` (0 where the run is not finite): at a rest, the force its
+    integral holds against friction, the state a window restarted there starts in
+    (:meth:`Chunk.rest_windows`)."""
+    u = np.zeros(chunk.n)
+    simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, base.theta, flags=base.flags(), ep=base.ep, modes=base.modes,
+                       starts=chunk.starts, derivs=chunk.derivs, u_out=u, warm=chunk.warm)
+    return np.where(np.isfinite(u), u, 0.0)
+
+
+def race_part(chunk: Chunk, frac: float, cfg: DiagnosisConfig, restart: bool = True,
+              held: np.ndarray | None = None) -> Chunk:
     """What a race round at fidelity ``frac`` fits on: ``frac`` × ``cfg.race_seconds`` of
     windows spread over the whole recording, or the first ``frac`` of every segment
     (:meth:`Chunk.part`; all of it at 1).
 
     The windows restart mid-move on the recorded state (:meth:`Chunk.windows`) for models
     whose state a restart can read from the recording (``restart``,
-    :attr:`Effect.restartable`), else at rests (:meth:`Chunk.rest_windows`); a recording
-    without a rest the recording shows is raced on :meth:`Chunk.part`.  Windows only where
-    they cut the work at least in half: on a recording barely longer than race_seconds
-    they cost what it costs and only add restarts (a 6.8 s LinuxCNC capture lost its 20 µm
-    gap to them).
+    :attr:`Effect.restartable`), else at rests (:meth:`Chunk.rest_windows`, holding the
+    force ``held``, see :func:`held_force`); a recording without a rest the recording
+    shows is raced on :meth:`Chunk.part`.  Windows only where they cut the work at least
+    in half: on a recording barely longer than race_seconds they cost what it costs and
+    only add restarts (a 6.8 s LinuxCNC capture lost its 20 µm gap to them).
     """
     if 0 < 2 * cfg.race_seconds <= chunk.n * chunk.Ts:
         if restart:
             return chunk.windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.race_lead_s)
-        rested = chunk.rest_windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.rest_restart_s)
+        rested = chunk.rest_windows(frac * cfg.race_seconds, cfg.race_window_s, cfg.rest_restart_s, held)
         if rested is not None:
             return rested
     return chunk.part(frac)

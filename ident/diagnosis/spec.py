@@ -137,11 +137,14 @@ class Chunk:
             starts[r] = True
         return self._take(keep, starts, score, (warm, vw, aw))
 
-    def rest_windows(self, seconds: float, window_s: float = 1.0, rest_s: float = 0.05) -> "Chunk | None":
+    def rest_windows(self, seconds: float, window_s: float = 1.0, rest_s: float = 0.05,
+                     held: np.ndarray | None = None) -> "Chunk | None":
         """About ``seconds`` of the chunk in windows spread over all of it, as :meth:`windows`,
         but each restarting where the axis rests: at its segment's start or at the end of a
         dwell of the command at least ``rest_s`` long where the recording shows the axis at
-        rest (the restarts of :meth:`rests`, velocity 0).
+        rest (the restarts of :meth:`rests`, velocity 0), the integral holding ``held``
+        there (mm/s², an array over the chunk's samples: the force a model's own free run
+        holds at each rest, :func:`~ident.diagnosis.candidates.held_force`; 0 when None).
 
         For a model with a state no recording shows mid-move — an integral wound up while
         the output is clipped — a window restarted mid-move misreads it, but at a rest it is
@@ -170,7 +173,7 @@ class Chunk:
             if r > end or self.starts[r]:  # a new window: the simulation restarts at the rest
                 starts[r] = True
                 if rest_warm[r]:
-                    warm[r], vw[r], aw[r] = True, 0.0, 0.0
+                    warm[r], vw[r], aw[r] = True, 0.0, 0.0 if held is None else float(held[r])
             keep[r:b] = True
             end = max(end, b)
         return self._take(keep, starts, self.score, (warm, vw, aw))
