@@ -329,8 +329,7 @@ def held_force(base: ModelSpec, chunk: Chunk) -> np.ndarray:
     integral holds against friction, the state a window restarted there starts in
     (:meth:`Chunk.rest_windows`)."""
     u = np.zeros(chunk.n)
-    simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, base.theta, flags=base.flags(), ep=base.ep, modes=base.modes,
-                       starts=chunk.starts, derivs=chunk.derivs, u_out=u, warm=chunk.warm)
+    simulate_spec(base, chunk, u_out=u)
     return np.where(np.isfinite(u), u, 0.0)
 
 

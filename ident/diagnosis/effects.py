@@ -35,9 +35,9 @@ import numpy as np
 
 from core.effects import EFFECTS as REGISTRY
 from core.effects import MODEL, shown_unit
-from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS, simulate_augmented
+from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS
 from ident.diagnosis.config import DiagnosisConfig
-from ident.diagnosis.spec import Chunk, ModelSpec, sse
+from ident.diagnosis.spec import Chunk, ModelSpec, simulate_spec, sse
 
 __all__ = ["Effect", "TimeDelay", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share", "motor_shares",
            "told"]
@@ -632,8 +632,7 @@ class Saturation(Effect):
 
     def starts(self, base, chunk, evidence, cfg):
         u = np.empty(chunk.n)
-        simulate_augmented(chunk.x_r, chunk.x, chunk.Ts, base.theta, flags=base.flags(), ep=base.ep,
-                           modes=base.modes, starts=chunk.starts, derivs=chunk.derivs, u_out=u, warm=chunk.warm)
+        simulate_spec(base, chunk, u_out=u)
         ok = np.isfinite(u)
         u, v = u[ok], chunk.derivs[0][ok]
         # ψ: the share of the position term that is the integral of the motor velocity —

@@ -429,8 +429,11 @@ class ModelSpec:
         return bool(self.modes[MODE_SLOTS["controller"]])
 
 
-def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None) -> np.ndarray:
-    """Free-run recorded position (mm) of ``spec`` on ``chunk``."""
+def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None,
+                  u_out: np.ndarray | None = None) -> np.ndarray:
+    """Free-run recorded position (mm) of ``spec`` on ``chunk``; ``u_out`` (chunk.n,), when
+    given, is filled with the control-equivalent acceleration u (mm/s²) applied at each
+    sample (:func:`~ident.diagnosis.augmented.simulate_augmented`)."""
     return simulate_augmented(
         chunk.x_r,
         chunk.x,
@@ -442,6 +445,7 @@ def simulate_spec(spec: ModelSpec, chunk: Chunk, nsub: int | None = None) -> np.
         starts=chunk.starts,
         derivs=chunk.derivs,
         nsub=nsub,
+        u_out=u_out,
         warm=chunk.warm,
     )
 
