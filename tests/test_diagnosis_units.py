@@ -110,6 +110,14 @@ def test_saturation_slows_the_fastest_moves(x_r):
     assert np.linalg.norm(limited - sim(x_r)) > 1e-3
 
 
+def test_a_set_that_is_no_model_applies_no_force(x_r):
+    # a diverged step's parameters are not simulated: its u is NaN, not whatever the
+    # caller's buffer held (callers keep only the finite samples)
+    u = np.full(x_r.size, 123.0)
+    y = simulate_augmented(x_r, x_r, Ts, THETA * np.array([np.nan, 1, 1, 1, 1, 1, 1, 1]), nsub=8, u_out=u)
+    assert np.isnan(y).all() and np.isnan(u).all()
+
+
 def test_output_error_fit_recovers_a_perturbed_base_model(x_r):
     x = sim(x_r)
     chunk = make_chunk(x_r, x, Ts, segment_starts(x_r.size, None))

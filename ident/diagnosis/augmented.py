@@ -264,7 +264,8 @@ def simulate_augmented(
     nsub : int, optional
         Sub-steps per sample; default from :func:`substeps`.
     u_out : ndarray (N,), optional
-        Filled with the control-equivalent acceleration u (mm/s²) applied at each sample.
+        Filled with the control-equivalent acceleration u (mm/s²) applied at each sample
+        (NaN if the parameters are no model to simulate).
     warm : (mask, v, a), optional
         Segment starts that restart mid-move (``mask``, bool (N,): a window cut out of a
         longer recording, :meth:`~ident.diagnosis.spec.Chunk.windows`) and the recorded
@@ -287,6 +288,8 @@ def simulate_augmented(
     e = np.zeros(N_EP) if ep is None else np.ascontiguousarray(ep, dtype=float)
     md = np.zeros(N_MODES, dtype=np.int64) if modes is None else _padded_modes(modes)
     if not _runnable(th.reshape(1, 8), e.reshape(1, N_EP))[0]:
+        if u_out is not None:  # no force applied either, whatever the buffer held
+            u_out[:] = np.nan
         return np.full(n, np.nan)  # no model to simulate (a diverged fit step)
     if nsub is None:
         nsub = model_substeps(th, Ts, fl, e, md)
