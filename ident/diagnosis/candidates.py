@@ -375,9 +375,11 @@ def shoot(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
 
 
 def polish(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
-    """A search's winner fitted on the whole ``chunk`` (half of ``cfg.joint_iter``, then the fine step)."""
+    """A search's winner fitted on the whole ``chunk`` (half of ``cfg.joint_iter``, then the fine step),
+    with the parameters its effects hold during the race released (:meth:`Effect.releasable`)."""
+    released = tuple(q for e in spec.effects for q in EFFECT_MODELS[e].releasable(spec))
     return fit_spec(spec, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, search=True,
-                    cfg=cfg)
+                    also_free=released, cfg=cfg)
 
 
 def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:

@@ -105,8 +105,9 @@ class Effect:
         raise NotImplementedError
 
     def releasable(self, spec: ModelSpec) -> list[str]:
-        """Parameters the search holds at its starts' readings that a fit may free
-        (``fit_spec(also_free=)``): none unless the effect says."""
+        """Parameters the race holds at its starts' readings and the polish frees
+        (``fit_spec(also_free=)``, :func:`~ident.diagnosis.candidates.polish`): none unless
+        the effect says."""
         return []
 
     def bounds(self, name: str, p0: float, chunk: Chunk, cfg: DiagnosisConfig) -> tuple[float, float]:
@@ -206,7 +207,7 @@ class Backlash(Effect):
 
     def releasable(self, spec):
         # the full-closed loop's position term: its motor share ψ is started at the
-        # readings of θ (motor_shares) and held by the search, but it trades with the gap
+        # readings of θ (motor_shares) and held by the race, but it trades with the gap
         return ["position_motor_share"] if self.variant(spec) == 1 else []
 
     def bounds(self, name, p0, chunk, cfg):
