@@ -6,9 +6,8 @@ of :class:`~ident.diagnosis.effects.Backlash` started), then the profile of the 
 free-run cost (eq. 3.6) over the gap: for every variant (0 massless table, 1 two-mass
 full-closed, 2 two-mass semi-closed) and every gap of ``--ratios`` × the label, the model
 re-fitted with the gap held (``--iter`` iterations, everything else free: θ of eq. 3.3,
-the motor share, and in variant 1 the position term's motor share ψ as the accepted
-model's re-estimation frees it, :func:`~ident.diagnosis.candidates.profile_gap`; with
-``--hold-psi`` ψ stays at the search's reading of θ, as in the search), started from the
+the motor share, and in variant 1 the position term's motor share ψ; with
+``--hold-psi`` ψ stays where the search left it), started from the
 search's model (its variant, or switched to the other one).  Printed per point: the cost relative to the search's, and the residual rms over the
 slow part of the recording (before the command first exceeds ``--slow`` mm/s: the
 low-speed set of tiny moves) and over the rest.  If the fit stopped short of a minimum at
@@ -71,8 +70,9 @@ def profile(zoo: Path, case: dict, ratios: list[float], variants: list[int], ite
                     s0.ep[i_mu] = 0.5
             g = r * truth
             s0.ep[i_g] = g
-            s1 = fit_spec(s0, full, max_iter=iters, bounds={"gap_mm": (0.999 * g, 1.001 * g)},
-                          also_free=() if hold_psi else ("position_motor_share",), cfg=cfg)
+            if hold_psi:  # a parameter named in ranges is held by the fit
+                s0.ranges["position_motor_share"] = (s0.ep[i_psi], s0.ep[i_psi])
+            s1 = fit_spec(s0, full, max_iter=iters, bounds={"gap_mm": (0.999 * g, 1.001 * g)}, cfg=cfg)
             c = sse(s1, full)
             costs.append(c)
             lines.append(f"    variant {mode}  gap {r:4.2f} × truth: cost {c / c_fit:7.3f} × the search's   "
@@ -90,7 +90,7 @@ def main() -> None:
     ap.add_argument("--variants", default="0,1,2", help="backlash variants profiled")
     ap.add_argument("--iter", type=int, default=15, help="iterations of each held-gap fit")
     ap.add_argument("--slow", type=float, default=10.0, help="mm/s: the command speed that ends the slow part")
-    ap.add_argument("--hold-psi", action="store_true", help="hold ψ at the search's reading (as the search does)")
+    ap.add_argument("--hold-psi", action="store_true", help="hold ψ where the search left it")
     args = ap.parse_args()
     zoo = Path(args.zoo)
     cases = zoo_cases(zoo, "backlash", args.cases)

@@ -744,7 +744,7 @@ def test_a_backlash_gap_started_off_by_half_moves_to_the_true_gap(x_r, start_gap
 
 def _full_closed_gap() -> tuple:
     """A full-closed drive across a 20 µm gap whose position term reads the motor in part
-    (ψ = 0.25), and the start the race holds ψ at: a reading of θ (here 0.85)."""
+    (ψ = 0.25), and a start with ψ at a reading of θ (here 0.85), as the search starts."""
     x_r = point_to_point(3)
     ep = np.zeros(N_EP)
     ep[EP_INDEX["gap_mm"]] = 0.02
@@ -760,30 +760,33 @@ def _full_closed_gap() -> tuple:
     return chunk, start
 
 
+def _held_psi(spec: ModelSpec) -> ModelSpec:
+    held = spec.copy()
+    held.ranges["position_motor_share"] = (0.85, 0.85)  # a parameter in ranges is held
+    return held
+
+
 def test_a_full_closed_gap_is_sized_with_the_position_terms_motor_share_fitted_beside_it():
-    # the gap trades with ψ: held at the race's reading the fit sizes the gap about half.
-    # The accepted model's profile over the gap, ψ fitted beside it
-    # (candidates.profile_gap), must size it within 25 %.
+    # the gap trades with ψ: held at the start's reading the fit sizes the gap about half;
+    # fitted beside it, ψ moves to the drive's and the gap comes within 25 %
+    chunk, start = _full_closed_gap()
+    held = fit_spec(_held_psi(start), chunk, cfg=DEFAULT)
+    assert held.ep[EP_INDEX["gap_mm"]] < 0.75 * 0.02
+    fitted = fit_spec(start, chunk, cfg=DEFAULT)
+    assert abs(fitted.ep[EP_INDEX["position_motor_share"]] - 0.25) < 0.5 * abs(0.85 - 0.25)
+    assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.25)
+
+
+def test_the_profile_over_the_gap_moves_a_gap_left_short_to_the_cheaper_point():
+    # a fit that stopped short of the gap (here held there by ψ): the accepted model's
+    # profile over the gap (candidates.profile_gap) must size it within 25 % at lower cost
     from ident.diagnosis.candidates import profile_gap
 
     chunk, start = _full_closed_gap()
-    held = fit_spec(start, chunk, cfg=DEFAULT)
-    assert held.ep[EP_INDEX["gap_mm"]] < 0.75 * 0.02  # the bias the profile cures
-    profiled = profile_gap(held, chunk, DEFAULT)
+    short = fit_spec(_held_psi(start), chunk, cfg=DEFAULT).released()
+    profiled = profile_gap(short, chunk, DEFAULT)
     assert profiled.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.25)
-    assert sse(profiled, chunk) < sse(held, chunk)
-
-
-def test_a_searchs_polish_frees_the_motor_share_the_race_held():
-    # the race's winner still holds ψ at the reading it started from; the polish on the
-    # whole recording frees it (Effect.releasable), so the gap a search hands on is not
-    # the one biased by a held ψ
-    from ident.diagnosis.candidates import polish
-
-    chunk, start = _full_closed_gap()
-    polished = polish(start, chunk, DEFAULT)
-    assert abs(polished.ep[EP_INDEX["position_motor_share"]] - 0.25) < 0.5 * abs(0.85 - 0.25)
-    assert polished.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.25)
+    assert sse(profiled, chunk) < sse(short, chunk)
 
 
 def test_the_search_finds_a_gap_the_base_model_has_absorbed(x_r):

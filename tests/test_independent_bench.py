@@ -218,9 +218,9 @@ def test_a_full_closed_gap_is_sized_by_the_likelihood_with_a_variance_per_segmen
     the tracking-error weights shrinks the gap to make that oscillation smaller.
     The accepted model re-fitted with a noise variance of each segment's own
     (candidates.segment_variance_fit) must size it closer to the truth.  The verdict is a
-    close call: the gap removes 33 % of the held-out residual, a 2.4 ms dead time 32 %
-    (the gap won once the search's polish freed the position term's motor share ψ; before,
-    the dead time was named beside it)."""
+    close call: the gap removes about a third of the held-out residual, a 2.4 ms dead time
+    32 % (the gap wins since the position term's motor share ψ is fitted beside it; held at
+    a reading of θ, the dead time was named beside the gap)."""
     import ident
     from ident.diagnosis.config import DiagnosisConfig
 

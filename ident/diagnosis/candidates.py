@@ -78,13 +78,12 @@ def rippled(spec: ModelSpec) -> bool:
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
              max_iter: int = 25, bounds: dict[str, tuple[float, float]] | None = None,
              fd_step: float | None = None, polish: bool = True, secant_nfev: int = 0, search: bool = False,
-             also_free: tuple[str, ...] = (), cfg: DiagnosisConfig) -> ModelSpec:
+             cfg: DiagnosisConfig) -> ModelSpec:
     """Output-error fit (eq. 3.6 on the free-run simulation) of base and effect parameters.
 
     Starts from ``spec``; base parameters move jointly with the effects' parameters
     (:meth:`Effect.free <ident.diagnosis.effects.Effect.free>`, inside their bounds) when
-    ``fit_base``; ``also_free`` frees further parameters of the effects (a variant's
-    structure parameter the search holds); ``bounds`` narrows the box of named effect parameters; parameters named in
+    ``fit_base``; ``bounds`` narrows the box of named effect parameters; parameters named in
     ``spec.ranges`` (weakly determined, centred by :func:`centre_delay`) are held.
     ``fd_step``: the forward-difference step (scaled units; default ``cfg.fd_step``); a
     step coarser than ``cfg.fd_step`` is followed by a polish at the fine step (half the
@@ -106,7 +105,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     if fit_effects:
         for e in spec.effects:
             eff = EFFECT_MODELS[e]
-            for p in eff.free(spec) + [q for q in also_free if q in eff.releasable(spec)]:
+            for p in eff.free(spec):
                 if p not in spec.ranges and p not in names:
                     names.append(p)
                     own.append(eff)
@@ -375,11 +374,9 @@ def shoot(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
 
 
 def polish(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
-    """A search's winner fitted on the whole ``chunk`` (half of ``cfg.joint_iter``, then the fine step),
-    with the parameters its effects hold during the race released (:meth:`Effect.releasable`)."""
-    released = tuple(q for e in spec.effects for q in EFFECT_MODELS[e].releasable(spec))
+    """A search's winner fitted on the whole ``chunk`` (half of ``cfg.joint_iter``, then the fine step)."""
     return fit_spec(spec, chunk, max_iter=max(cfg.joint_iter // 2, 1), fd_step=cfg.fd_step_rough, search=True,
-                    also_free=released, cfg=cfg)
+                    cfg=cfg)
 
 
 def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:
@@ -428,19 +425,18 @@ def profile_gap(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpe
     if "backlash" not in spec.effects or not g_hat > 0.0 or not cfg.gap_profile_ratios:
         return spec
     c_spec = sse(spec, chunk)
-    freed = ("position_motor_share",)
-    best = fit_spec(spec, chunk, max_iter=cfg.gap_profile_iter, also_free=freed, cfg=cfg)
+    best = fit_spec(spec, chunk, max_iter=cfg.gap_profile_iter, cfg=cfg)
     c_best = sse(best, chunk)
     for r in cfg.gap_profile_ratios:
         s0 = best.copy()
         g = r * g_hat
         s0.ep[k] = g
         s1 = fit_spec(s0, chunk, max_iter=cfg.gap_profile_iter, bounds={"gap_mm": (0.999 * g, 1.001 * g)},
-                      also_free=freed, cfg=cfg)
+                      cfg=cfg)
         c1 = sse(s1, chunk)
         if c1 < c_best:
             best, c_best = s1, c1
-    free = fit_spec(best, chunk, max_iter=cfg.gap_profile_iter, also_free=freed, cfg=cfg)
+    free = fit_spec(best, chunk, max_iter=cfg.gap_profile_iter, cfg=cfg)
     c_free = sse(free, chunk)
     if c_free <= c_best:
         best, c_best = free, c_free

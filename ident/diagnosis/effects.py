@@ -104,12 +104,6 @@ class Effect:
     def free(self, spec: ModelSpec) -> list[str]:
         raise NotImplementedError
 
-    def releasable(self, spec: ModelSpec) -> list[str]:
-        """Parameters the race holds at its starts' readings and the polish frees
-        (``fit_spec(also_free=)``, :func:`~ident.diagnosis.candidates.polish`): none unless
-        the effect says."""
-        return []
-
     def bounds(self, name: str, p0: float, chunk: Chunk, cfg: DiagnosisConfig) -> tuple[float, float]:
         if name == "motor_fraction":
             return 0.2, 0.98
@@ -203,12 +197,11 @@ class Backlash(Effect):
     start_gaps_mm = (0.003, 0.01, 0.03, 0.1, 0.3)
 
     def free(self, spec):
-        return ["gap_mm", "motor_fraction"] if self.variant(spec) >= 1 else ["gap_mm"]
-
-    def releasable(self, spec):
-        # the full-closed loop's position term: its motor share ψ is started at the
-        # readings of θ (motor_shares) and held by the race, but it trades with the gap
-        return ["position_motor_share"] if self.variant(spec) == 1 else []
+        # the full-closed loop's position term reads the motor in part (ψ): started at the
+        # readings of θ (motor_shares), fitted beside the gap, which trades with it
+        v = self.variant(spec)
+        return ["gap_mm", "motor_fraction", "position_motor_share"] if v == 1 else (
+            ["gap_mm", "motor_fraction"] if v >= 1 else ["gap_mm"])
 
     def bounds(self, name, p0, chunk, cfg):
         return (0.0, 1.0) if name in ("gap_mm", "position_motor_share") else super().bounds(name, p0, chunk, cfg)
