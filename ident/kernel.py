@@ -1096,9 +1096,10 @@ def _runnable(TH: np.ndarray, E: np.ndarray) -> np.ndarray:
 def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, warm,
           u_out: np.ndarray | None = None, load: np.ndarray | None = None, start_rule: int = 0) -> np.ndarray:
     """:func:`_kernel_many` on P sets of parameters of number type ``dtype`` (float or complex);
-    rows that are no model to simulate (:func:`_runnable`) are NaN.  ``u_out`` (N,), one set
-    only: filled with the u the set applied (NaN if it is no model to run).  ``load`` (N,),
-    mm/s²: an external acceleration added to the command drive (:class:`ident.simulation.FreeRun`'s disturbance).
+    rows that are no model to simulate (:func:`_runnable`) are NaN.  ``u_out`` (N,), one
+    runnable set only (:func:`~ident.diagnosis.augmented.simulate_augmented` checks): filled
+    with the u the set applied.  ``load`` (N,), mm/s²: an external acceleration added to the
+    command drive (:class:`ident.simulation.FreeRun`'s disturbance).
     ``start_rule``: 0 a segment starts at rest (or warm), 1 as the identification's free run
     does (:mod:`ident.simulation`: z = 0, ẋ = ẋ_r)."""
     x_r = np.ascontiguousarray(x_r, dtype=float)
@@ -1119,8 +1120,6 @@ def _many(x_r, x0, Ts, thetas, eps, dtype, flags, modes, starts, derivs, nsub, w
                      int(start_rule))
         if u_out is not None:
             u_out[:] = out_u[0]
-    elif u_out is not None:  # no model to run: no force applied either
-        u_out[:] = np.nan
     if ok.all():
         return y
     out = np.full((TH.shape[0], n), np.nan, dtype=dtype)

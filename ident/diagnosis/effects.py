@@ -200,8 +200,8 @@ class Backlash(Effect):
         # the full-closed loop's position term reads the motor in part (ψ): started at the
         # readings of θ (motor_shares), fitted beside the gap, which trades with it
         v = self.variant(spec)
-        return ["gap_mm", "motor_fraction", "position_motor_share"] if v == 1 else (
-            ["gap_mm", "motor_fraction"] if v >= 1 else ["gap_mm"])
+        two_mass = ["gap_mm", "motor_fraction"] if v >= 1 else ["gap_mm"]
+        return two_mass + ["position_motor_share"] if v == 1 else two_mass
 
     def bounds(self, name, p0, chunk, cfg):
         return (0.0, 1.0) if name in ("gap_mm", "position_motor_share") else super().bounds(name, p0, chunk, cfg)
