@@ -789,6 +789,30 @@ def test_the_profile_over_the_gap_moves_a_gap_left_short_to_the_cheaper_point():
     assert sse(profiled, chunk) < sse(short, chunk)
 
 
+@pytest.mark.parametrize("start_gap_mm", [0.014, 0.026])
+def test_the_accepted_models_estimate_is_a_stationary_point_of_its_cost(start_gap_mm):
+    # the re-estimation (candidates.segment_variance_fit) ends with exact slopes: at its end
+    # every parameter's sensitivity is orthogonal to the residual (the first-order condition
+    # of least squares, the cosine MINPACK's gtol bounds); difference steps stopped at a
+    # cosine of 1e-3 on this drive, the gap already right
+    from ident.diagnosis.candidates import segment_variance_fit
+    from ident.diagnosis.spec import residual, residual_jacobian
+
+    chunk, start = _full_closed_gap()
+    start.ep[EP_INDEX["gap_mm"]] = start_gap_mm
+    start.ep[EP_INDEX["position_motor_share"]] = 0.25
+    fitted = segment_variance_fit(start, chunk, DEFAULT)
+    names = ("gap_mm", "position_motor_share", "motor_fraction")
+    d_theta, d_ep = np.zeros((8 + len(names), 8)), np.zeros((8 + len(names), N_EP))
+    d_theta[np.arange(8), np.arange(8)] = np.abs(fitted.theta)
+    for j, name in enumerate(names):
+        d_ep[8 + j, EP_INDEX[name]] = abs(fitted.ep[EP_INDEX[name]])
+    J, r = residual_jacobian(fitted, chunk, d_theta, d_ep), residual(fitted, chunk)
+    cosines = np.abs(J @ r) / (np.linalg.norm(J, axis=1) * np.linalg.norm(r))
+    assert cosines.max() < 1e-4
+    assert fitted.ep[EP_INDEX["gap_mm"]] == pytest.approx(0.02, rel=0.05)
+
+
 def test_the_search_finds_a_gap_the_base_model_has_absorbed(x_r):
     # the search starts from a base identified without the gap, which has taken part of
     # it up (Coulomb offset, integral gain): base and gap must move back together

@@ -36,6 +36,7 @@ or a floor) so one difference step suits parameters as different as a3 ≈ 1e6 1
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -395,7 +396,11 @@ def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) ->
     ``cfg.segment_variance_tol`` or after ``cfg.segment_variance_steps`` re-weightings.
     The first fit is always made, so ``spec`` is fitted on ``chunk`` even where it has one
     segment (one variance: the weights of the search).  A gap is then profiled under the
-    last weights (:func:`profile_gap`).
+    last weights (:func:`profile_gap`), and with ``cfg.estimate_exact`` the model is
+    polished there with exact Jacobians (:func:`~ident.diagnosis.spec.residual_jacobian`):
+    the differences' steps stop where the difference quotient stops telling the slope, the
+    exact slope goes on to the stationary point of the cost the estimate and its intervals
+    (:mod:`ident.diagnosis.intervals`) stand for.
     """
     fitted_on = chunk  # the weights of the last fit
     for step in range(cfg.segment_variance_steps):
@@ -403,7 +408,14 @@ def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) ->
         if step and np.max(np.abs(weighted.w / fitted_on.w - 1.0)) < cfg.segment_variance_tol:
             break
         spec, fitted_on = fit_spec(spec, weighted, max_iter=cfg.segment_variance_iter, cfg=cfg), weighted
-    return profile_gap(spec, fitted_on, cfg)
+    spec = profile_gap(spec, fitted_on, cfg)
+    if cfg.estimate_exact:
+        # the floor of the valley the differences found: a local fit only goes downhill, so
+        # the polish keeps what the differences reached (on a two-mass gap, exact slopes
+        # from the search's point instead stopped in a ripple of the hunting's cost)
+        exact = replace(cfg, exact_fine=True, exact_rough=True, fit_log=True)
+        spec = fit_spec(spec, fitted_on, max_iter=cfg.segment_variance_iter, cfg=exact)
+    return spec
 
 
 def profile_gap(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) -> ModelSpec:

@@ -282,6 +282,12 @@ class DiagnosisConfig:
     gap_profile_ratios: tuple[float, ...] = (0.7, 1.3, 1.7)
     #: … for this many iterations each.
     gap_profile_iter: int = 10
+    #: The accepted model, re-weighted and profiled, is last polished with exact Jacobians
+    #: (``exact_fine``, ``exact_rough`` and ``fit_log`` on) for ``segment_variance_iter``
+    #: iterations: the search chose the valley with its difference steps, the estimate is
+    #: the valley's floor.  On the tuning sets, one run each: every verdict as without it,
+    #: zoo main parameters within 25 % 23/26 → 24/26.
+    estimate_exact: bool = True
 
     # -- a weakly determined dead time (candidates.centre_delay) ------------------------
     #: Delays whose training cost lies within this share of the best fit equally well (2 %
