@@ -400,7 +400,8 @@ def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) ->
     polished there with exact Jacobians (:func:`~ident.diagnosis.spec.residual_jacobian`):
     the differences' steps stop where the difference quotient stops telling the slope, the
     exact slope goes on to the stationary point of the cost the estimate and its intervals
-    (:mod:`ident.diagnosis.intervals`) stand for.
+    (:mod:`ident.diagnosis.intervals`) stand for.  On a model whose cost ripples
+    (:func:`rippled`) the polish takes fine differences, as every fit there does.
     """
     fitted_on = chunk  # the weights of the last fit
     for step in range(cfg.segment_variance_steps):
