@@ -762,7 +762,8 @@ def _full_closed_gap() -> tuple:
 
 def _held_psi(spec: ModelSpec) -> ModelSpec:
     held = spec.copy()
-    held.ranges["position_motor_share"] = (0.85, 0.85)  # a parameter in ranges is held
+    psi = float(spec.ep[EP_INDEX["position_motor_share"]])
+    held.ranges["position_motor_share"] = (psi, psi)  # a parameter in ranges is held
     return held
 
 
