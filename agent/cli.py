@@ -1,7 +1,8 @@
 """The ``agent`` command line: one typer app, one module per command in agent/commands/.
 
 Each command module defines a typer-annotated function; this file only registers them
-and turns project errors into one-line messages (exit 2 for bad input, 1 otherwise).
+and turns project errors, usage errors included, into one-line messages (exit 2 for bad
+input, 1 otherwise).
 """
 
 from __future__ import annotations
@@ -132,9 +133,31 @@ def _register() -> None:
         app.command(name)(reports_errors(func))
 
 
+def usage_error_line(exc: typer.TyperException) -> str:
+    """The one line a command-line usage error prints: typer's message (a missing argument, an
+    unknown option, an option without its value) and where the usage is told."""
+    ctx = getattr(exc, "ctx", None)
+    where = f" (see '{ctx.command_path} --help')" if ctx is not None else ""
+    return f"error: {exc.format_message().rstrip('.')}{where}"
+
+
 def main() -> None:
+    """The ``agent`` console script: the app outside typer's standalone mode, so that a usage
+    error is one ``error:`` line like every other bad input (typer's own is a boxed panel
+    with the usage above it), with the exit status typer gives it (2)."""
     _register()
-    app()
+    try:
+        status = app(standalone_mode=False)
+    except typer.TyperException as exc:
+        message = exc.format_message()
+        if message:  # empty: ``agent`` alone, whose help typer has already printed
+            print(usage_error_line(exc), file=sys.stderr)
+        sys.exit(exc.exit_code)
+    except typer.Abort:  # end of input at a prompt
+        print("aborted", file=sys.stderr)
+        sys.exit(1)
+    # an int where a command raised typer.Exit (``--help``: 0); None where it returned
+    sys.exit(status if isinstance(status, int) else 0)
 
 
 if __name__ == "__main__":

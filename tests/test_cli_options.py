@@ -68,6 +68,24 @@ def test_one_spelling_is_shown_and_the_other_still_works(command, shown, hidden,
         assert proc.returncode == 2 and "No such option" not in proc.stderr, proc.stderr
 
 
+@pytest.mark.parametrize("args, told", [
+    (("identify",), "Missing argument 'log'"),
+    (("identify", "rec.csv", "--json"), "Option '--json' requires an argument"),
+    (("identify", "rec.csv", "--bogus"), "No such option: --bogus"),
+    (("generate", "--n-low", "ten"), "Invalid value for '--n-low'"),
+    (("frob",), "No such command 'frob'"),
+])
+def test_a_usage_error_is_one_error_line_with_exit_status_2(args, told):
+    proc = agent(*args)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.startswith(f"error: {told}") and len(proc.stderr.splitlines()) == 1, proc.stderr
+
+
+def test_agent_alone_prints_its_help():
+    proc = agent()
+    assert proc.returncode == 2 and "identify" in proc.stdout and proc.stderr == ""
+
+
 def _lines_until(proc: subprocess.Popen, stream, wanted: str, timeout: float = 60) -> list[str]:
     """The lines of a pipe up to the first that starts with ``wanted`` (read from the raw file
     descriptor: a text wrapper's buffer would hide a second line that came with the first)."""
