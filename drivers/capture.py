@@ -224,8 +224,9 @@ def capture(
     Parameters
     ----------
     port : ``--port`` URL (SPEC §3); its scheme picks the driver.
-    out : the ``.mcap`` file to write.  A file already there is removed once the inputs are
-        checked, before connecting (docs/capture.md, What is written when).
+    out : the ``.mcap`` file to write.  A file already there is replaced once the stream is
+        described and its axes found, when recording starts; a capture that fails before
+        leaves it as it was (docs/capture.md, What is written when).
     axes : axis names to record (default: every axis the controller streams).
     duration : stop after this much controller time, s (None: until the program ends or Ctrl-C).
     progress : show the live progress line on stderr.
@@ -246,10 +247,6 @@ def capture(
         raise InputError(f"-o {out}: directory {out.parent} does not exist")
     url, speed = _replay_speed(parse_port_url(port))
     driver = open_driver(url, axes)  # checks every option (and loads a register map) before any I/O
-    # Every input is valid: the capture starts.  A log left at -o by an earlier capture goes
-    # now, so a capture that fails before the stream starts leaves no file that reads as its own.
-    if out.is_file() or out.is_symlink():
-        out.unlink()
     stop = _Stop()
     with _signals(stop):
         info = driver.open()
@@ -257,6 +254,12 @@ def capture(
             if stop.event.is_set():
                 raise TransportError(f"{stop.reason} while connecting to {url.raw}; nothing recorded")
             idx = select_axes(info, axes)
+            # The stream is described and its axes are there: recording starts, and only now
+            # does a log left at -o by an earlier capture go.  A capture that fails before
+            # (a port that does not open, a silent controller, an unknown axis) recorded
+            # nothing and loses nothing: the earlier log stays as it was, beside the error.
+            if out.is_file() or out.is_symlink():
+                out.unlink()
             return _record(driver, info, idx, url.raw, url.scheme, out, duration, progress, read_timeout, stop,
                            speed)
         finally:

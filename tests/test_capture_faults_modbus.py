@@ -167,9 +167,9 @@ def test_a_program_name_with_a_space_is_kept_whole(tmp_path):
     assert load(tmp_path).metadata["programs"] == [{"name": "low speed.nc", "sha256": sha}]
 
 
-def test_a_capture_that_cannot_connect_leaves_no_older_log_at_o(tmp_path):
+def test_a_capture_that_cannot_connect_keeps_the_earlier_log_at_o(tmp_path):
     old = tmp_path / "log.mcap"
     old.write_bytes(b"an older capture")
     res = run_capture(f"modbus-tcp://127.0.0.1:{free_port()}", tmp_path)
     assert_one_error_line(res, "cannot connect")
-    assert not old.exists()
+    assert old.read_bytes() == b"an older capture"  # nothing was recorded, nothing is lost

@@ -82,7 +82,7 @@ def test_a_stream_that_never_sends_a_sample_fails_even_when_the_duration_ends_it
     assert summary(tmp_path)["end"] == "transport error" and summary(tmp_path)["received"] == 0
 
 
-def test_a_capture_that_fails_before_the_stream_starts_leaves_no_older_log_at_o(tmp_path):
+def test_a_capture_that_fails_before_the_stream_starts_keeps_the_earlier_log_at_o(tmp_path):
     old = tmp_path / "log.mcap"
     old.write_bytes(b"an older capture")
     with TickSender(ticks=3000, info=False, samples=False) as peer:
@@ -91,7 +91,7 @@ def test_a_capture_that_fails_before_the_stream_starts_leaves_no_older_log_at_o(
         assert old.read_bytes() == b"an older capture"
         res = run_capture(peer.url + "&open_timeout=0.5", tmp_path)
     assert_one_error_line(res, "no info frame")
-    assert not old.exists()
+    assert old.read_bytes() == b"an older capture"  # nothing was recorded, nothing is lost
 
 
 def test_a_served_program_is_captured_with_as_many_samples_and_the_same_duration_as_simulated(tmp_path):

@@ -75,6 +75,20 @@ def test_an_unknown_axis_is_a_one_line_error_naming_the_available_ones(tmp_path)
     assert not (tmp_path / "a.mcap").exists()
 
 
+def test_a_mistyped_axis_keeps_the_earlier_log_and_the_next_capture_replaces_it(tmp_path):
+    out = tmp_path / "a.mcap"
+    with served(random_walk()) as ep:
+        capture(ep.port_url(), out, axes=["X"], progress=False)
+    earlier = out.read_bytes()
+    with served(random_walk()) as ep:
+        with pytest.raises(InputError, match=r"no axis 'Q'"):
+            capture(ep.port_url(), out, axes=["Q"], progress=False)
+    assert out.read_bytes() == earlier  # nothing was recorded, nothing is lost
+    with served(random_walk()) as ep:
+        capture(ep.port_url(), out, axes=["Y"], progress=False)
+    assert load_recording(out).axis_names == ["Y"]
+
+
 def test_duration_records_exactly_that_much_controller_time(tmp_path):
     with served(random_walk(3000)) as ep:
         s = capture(ep.port_url(), tmp_path / "a.mcap", duration=0.25, progress=False)
