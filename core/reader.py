@@ -44,6 +44,8 @@ def load_recording(path: str | Path) -> Recording:
     else:
         with open(path, "rb") as fh:
             head = fh.read(8)
+        if not head.startswith(b"\x89MCAP") and not head.lstrip(b' \t"').startswith(b"t_s"):  # a part program, …
+            raise RecordingError(f"{path}: not a recording (an .mcap log, or a CSV whose first column is t_s)")
         rec = load_mcap(path) if head.startswith(b"\x89MCAP") else load_csv(path)
     check_recording(rec, str(path))
     rec.metadata["source"] = str(path)
@@ -196,10 +198,15 @@ def load_csv(path: str | Path) -> Recording:
     else:
         for i, name in enumerate(header):
             if name.endswith("_commanded_mm"):
-                axis = name[: -len("_commanded_mm")]
-                partner = f"{axis}_actual_mm"
+                given = name[: -len("_commanded_mm")]
+                partner = f"{given}_actual_mm"
                 if partner not in header:
                     raise RecordingError(f"{path}: column {name} has no matching {partner}")
+                # an axis is a G-code address letter, and G-code letters have no case: x_… is
+                # the axis X a part program moves (and a model identified from it predicts)
+                axis = given.upper()
+                if any(a == axis for a, _, _ in axes):
+                    raise RecordingError(f"{path}: two column pairs name axis {axis} (axis names have no case)")
                 axes.append((axis, i, header.index(partner)))
             elif name.endswith(("_commanded_m", "_actual_m")):
                 raise RecordingError(f"{path}: column {name} is in metres; give positions in mm (*_mm)")

@@ -119,7 +119,7 @@ def check_identifiable(rec: Recording, names: Sequence[str], *, units: str = "au
         With a one-line message saying what is wrong with the recording (see the module).
     """
     if units not in UNITS:
-        raise InputError.about("units", f"units {units!r}: choose mm or m")
+        raise InputError.about("units", f"units {units!r}: choose {', '.join(UNITS)}")
     name = _name(rec)
     actual_is = rec.metadata.get("actual_is") if isinstance(rec.metadata, dict) else None
     if actual_is or rec.metadata.get("transport") == "prediction":

@@ -87,6 +87,25 @@ def test_single_axis_csv_header_is_accepted(tmp_path):
     assert rec.sample_period == pytest.approx(1e-3)
 
 
+def test_csv_axis_letters_have_no_case_as_in_g_code(tmp_path):
+    path = tmp_path / "lower.csv"
+    path.write_text("t_s,x_commanded_mm,x_actual_mm\n0,0,0\n0.001,0.1,0.05\n0.002,0.2,0.15\n")
+    assert load_recording(path).axis_names == ["X"]  # the axis a part program's X moves
+    path.write_text("t_s,x_commanded_mm,x_actual_mm,X_commanded_mm,X_actual_mm\n0,0,0,0,0\n0.001,0,0,0,0\n")
+    with pytest.raises(RecordingError, match="two column pairs name axis X"):
+        load_recording(path)
+
+
+def test_a_file_that_is_no_recording_is_called_so_whatever_its_suffix(tmp_path):
+    program = tmp_path / "part.ngc"
+    program.write_text("G21 G90\nG1 X10 F600\nM2\n")
+    with pytest.raises(RecordingError, match=r"part\.ngc: not a recording \(an \.mcap log, or a CSV"):
+        load_recording(program)
+    quoted = tmp_path / "log.txt"  # a CSV by another name still loads
+    quoted.write_text('"t_s","commanded_mm","actual_mm"\n0,0,0\n0.001,0.1,0.05\n')
+    assert load_recording(quoted).axis_names == ["X"]
+
+
 @pytest.mark.parametrize(
     "content, message",
     [

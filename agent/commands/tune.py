@@ -18,7 +18,8 @@ def tune(
                                                       "pid: Kp, Ki, Kd, Kv, Ka), repeatable."),
     propose: List[str] = typer.Option([], "--propose", help="Check these gains [AXIS.]NAME=VALUE instead of searching."),
     radius: float = typer.Option(100.0, "--radius", help="Ballbar radius, mm."),
-    feed: float = typer.Option(1000.0 / 60.0, "--feed", help="Ballbar feed (the test feed), mm/s."),
+    feed: float = typer.Option(1000.0 / 60.0, "--feed", help="Ballbar feed (the test feed), mm/s.",
+                               show_default="16.67 = 1000 mm/min"),
     lead_deg: Optional[float] = typer.Option(None, "--lead-deg",
                                              help="Judge the ballbar as run: one program with feed-in/out arcs of "
                                                   "this many degrees (agent ballbar's, default there 180); without, "

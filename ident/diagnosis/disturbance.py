@@ -427,8 +427,9 @@ def _words(res: dict) -> str:
             "after_reversal": "follows reversals (lost motion or breakaway)",
             "acceleration": "follows the commanded acceleration (a limit or an unmodelled inertia)",
             "time_blocks": "comes in time blocks the motion does not explain"}[name]
-    return (f"the unexplained acceleration (rms {res['rms_mm_s2']:.3g} mm/s² below {res['band_hz']:.0f} Hz) "
-            f"{what}: {100 * ex[name]:.0f} % of it")
+    # a noun phrase: the diagnosis says "The model would need <this>."
+    return (f"an acceleration that {what}: {100 * ex[name]:.0f} % of the unexplained acceleration "
+            f"(rms {res['rms_mm_s2']:.3g} mm/s² below {res['band_hz']:.0f} Hz)")
 
 
 def fit_pct(e: np.ndarray, r: np.ndarray) -> float:

@@ -663,7 +663,8 @@ class Saturation(Effect):
         slope = p.get("limit_slope", 0.0)
         return (f"saturation of the control-equivalent acceleration, limit "
                 f"{self.said(p, 'limit', '.4g', intervals, unresolved)}"
-                + (f" at rest, falling by {self.said(p, 'limit_slope', '.3g', intervals, unresolved)} "
+                # the slope's unit, 1/s, told as what it is: mm/s² of limit per mm/s of speed
+                + (f" at rest, falling by {told(p, 'limit_slope', '.3g', ' mm/s²', intervals, unresolved)} "
                    "per mm/s of speed" if slope > 0.0 else "")
                 + ("" if p.get("anti_windup", True) else ", integral winding up while clipped"))
 
