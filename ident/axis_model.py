@@ -89,7 +89,11 @@ class AxisModel:
         """Free-run actual position x̂ (mm) for the commanded ``x_r`` (mm, at ``sample_period``).
 
         ``segment`` (N,) restarts the state at each change; ``x0`` the start position
-        (None: the command; an array (N,): its value at each segment start).
+        (an array (N,): its value at each segment start, the recorded actual position, where
+        the plain model starts as the identification fitted it, :mod:`ident.simulation`).
+        ``x0`` None predicts from a standing machine: each segment starts at rest on the
+        command with the integral at equilibrium, in both simulators, so a move predicted
+        from 7 mm is the one from the origin shifted by 7 mm.
         """
         from ident.preprocessing import shift_command
 
@@ -98,7 +102,7 @@ class AxisModel:
         if self.plain:
             from ident.simulation import simulate
 
-            return simulate(self.model, xs, self.sample_period, segment=segment, x0=x0)
+            return simulate(self.model, xs, self.sample_period, segment=segment, x0=x0, at_rest=x0 is None)
         from ident.diagnosis.augmented import segment_starts, simulate_augmented
 
         n = x_r.size

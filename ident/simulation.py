@@ -34,6 +34,11 @@ reduces to the linear model exactly.
 z = 0 (consistent with the regression's e_i, see :mod:`ident.preprocessing`), x from
 ``x0`` (the recorded actual position) or the command, ẋ = ẋ_r (the kernel's
 ``start_rule`` 1; the diagnosis starts at rest with the integral at equilibrium).
+``at_rest`` starts a prediction from rest instead: ẋ = 0 and z at its equilibrium
+z = (a2·x − b2·x_r)/a3.  z = 0 is rest only at the origin when b2 ≠ a2 (an equivalent
+model, e.g. of a P-PI cascade); elsewhere it is a force the model does not hold, and
+the axis drifts (0.5 mm from 7 mm on an identified fadal-ppi, tests/test_axis_model.py) and
+recovers at its slowest pole.
 
 A 25 000-sample run takes a few ms after the first (numba-compiled, cached) call; see
 ``benchmarks/bench_model_simulation.py``.
@@ -115,6 +120,7 @@ class FreeRun:
         segment: np.ndarray | None = None,
         x0: float | np.ndarray | None = None,
         substeps: int = DEFAULT_SUBSTEPS,
+        at_rest: bool = False,
     ) -> None:
         x_r = np.ascontiguousarray(x_r, dtype=float)
         if x_r.ndim != 1:
@@ -150,6 +156,7 @@ class FreeRun:
         self.x_start[starts] = x_init
         self.xr_dot, self.xr_ddot = xr_dot, xr_ddot
         self.substeps = max(int(substeps), 1)
+        self.start_rule = 0 if at_rest else 1
 
     def __call__(self, model, disturbance: np.ndarray | None = None) -> np.ndarray:
         """Simulated actual position x̂ (N,), mm, of ``model`` (DriveModel-like).
@@ -164,7 +171,8 @@ class FreeRun:
         theta = np.array(_params(model), dtype=float)
         return _many(self.x_r, self.x_start, self.Ts, theta, np.zeros(N_EP), float,
                      np.zeros(len(EFFECTS), dtype=np.int64), np.zeros(N_MODES, dtype=np.int64), self.seg_starts,
-                     (self.xr_dot, self.xr_ddot), self.substeps, None, load=disturbance, start_rule=1)[0]
+                     (self.xr_dot, self.xr_ddot), self.substeps, None, load=disturbance,
+                     start_rule=self.start_rule)[0]
 
 
 def simulate(
@@ -176,6 +184,7 @@ def simulate(
     x0: float | np.ndarray | None = None,
     substeps: int = DEFAULT_SUBSTEPS,
     disturbance: np.ndarray | None = None,
+    at_rest: bool = False,
 ) -> np.ndarray:
     """Free-run response x̂ (mm) of eq. 3.3 to the commanded trajectory alone.
 
@@ -199,10 +208,14 @@ def simulate(
         Sub-steps per sample for resolving friction switching (the linear part is exact).
     disturbance : ndarray (N,), optional
         Extra acceleration input, mm/s² (an external load), added to the command drive.
+    at_rest : bool
+        False: each segment starts as the identification fits (z = 0, ẋ = ẋ_r); True: at
+        rest, the integral at its equilibrium (a prediction from a standing machine, the
+        same wherever it stands; module docstring).
 
     Returns
     -------
     ndarray (N,)
         Simulated actual position at the sample instants, mm.
     """
-    return FreeRun(x_r, Ts, segment=segment, x0=x0, substeps=substeps)(model, disturbance)
+    return FreeRun(x_r, Ts, segment=segment, x0=x0, substeps=substeps, at_rest=at_rest)(model, disturbance)

@@ -7,8 +7,9 @@ in steady motion) and a feed-out arc of ``lead_deg``; a dwell; then the same clo
 back over the same arcs.  The model runs the whole program in one go, so the clockwise
 test starts from the state the counter-clockwise one left (the pid integrator's, a gap's
 side), as on the machine.  **Initial state assumed**: the axes at rest on the start point
-with the loop's state at zero (integrator empty, as after the machine is switched on),
-the contact at the gap's centre.  The predicted data arcs are read as a QC20 user reads a
+with the loop at its equilibrium there (integrator empty, as after the machine is switched
+on: the model's integral holds only what standing there needs, so the test reads as the
+written program run from anywhere), the contact at the gap's centre.  The predicted data arcs are read as a QC20 user reads a
 ballbar plot (:mod:`ident.ballbar`).  Two readings come from the model itself rather than
 from the plot:
 
@@ -54,8 +55,8 @@ LEAD_DEG = 180.0
 #: Dwell before each direction, s (as the validation contours).
 DWELL_S = 0.2
 #: The state the synthetic test starts from (module docstring).
-INITIAL_STATE = ("at rest on the start point, the loop's state at zero (integrator empty, as after the machine "
-                 "is switched on); the cw test starts from the state the ccw one left")
+INITIAL_STATE = ("at rest on the start point, the loop at its equilibrium there (integrator empty, as after the "
+                 "machine is switched on); the cw test starts from the state the ccw one left")
 
 
 @dataclass(frozen=True)

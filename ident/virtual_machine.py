@@ -192,7 +192,8 @@ class VirtualMachine:
         return run
 
     def run(self, programs: Sequence[ProgramLike], start: Mapping[str, float] | None = None) -> Prediction:
-        """Run ``programs`` in order from ``start`` and predict every moved axis (free run from the command)."""
+        """Run ``programs`` in order from ``start`` and predict every moved axis (free run from the command,
+        each program from rest on its first point: :meth:`AxisModel.simulate` with no ``x0``)."""
         run = self.command(programs, start)
         axes = {a: AxisTrace(x, self.axes[a].simulate(x, segment=run.segment)) for a, x in run.commanded.items()}
         rec = Recording(

@@ -53,3 +53,20 @@ def test_every_backlash_variant_the_diagnosis_reports_is_the_one_the_model_simul
     _theta, _flags, ep, modes = m.spec_arrays()
     assert int(modes[0]) == mode
     assert np.allclose(ep, spec.ep)
+
+
+#: An identified P-PI cascade (fadal-ppi): its equivalent of eq. 3.3 has b2 ≠ a2, so at rest at x the
+#: integral holds z = (a2 − b2)·x/a3, zero only at the origin.
+CASCADE = dict(a1=3174.4, a2=103319.8, a3=334817.3, b0=-0.0925, b1=574.16, b2=93839.0, d0=441.0, d1=-302.0)
+
+
+@pytest.mark.parametrize("effects", [{}, {"time_delay": {"delay_s": 0.002, "where": "capture"}}])
+def test_a_prediction_from_rest_is_the_same_wherever_the_axis_stands(effects):
+    """A drive standing still has no preferred position: the predicted move from 7 mm is the move
+    from the origin shifted by 7 mm, with the plain model's simulator as with the augmented one."""
+    import numpy as np
+
+    tau = np.clip((np.arange(1500) * 0.001 - 0.1) / 0.5, 0.0, 1.0)
+    x_r = 5.0 * tau ** 3 * (10 - 15 * tau + 6 * tau ** 2)  # rest, a 5 mm minimum-jerk move, rest
+    m = AxisModel(DriveModel(**CASCADE), 0.001, shift=-5, effects=effects)
+    assert np.max(np.abs(m.simulate(x_r + 7.0) - 7.0 - m.simulate(x_r))) < 1e-9

@@ -60,7 +60,7 @@ def ballbar(
                          lead_deg=lead_deg) for i, m in enumerate(machines)]
     for m, t in zip(machines, tests):
         typer.echo(f"machine {t.machine}: ballbar R {radius:g} mm at {feed:g} mm/s; {lead_deg:g}° feed-in/out arcs, "
-                   f"ccw then cw in one run from rest with the loop's state at zero")
+                   f"ccw then cw in one run from rest with the loop at its equilibrium")
         typer.echo(f"  planner: {m.planner['words']}")
         for w in t.words():
             typer.echo(f"  {w}")
