@@ -11,7 +11,7 @@ import math
 
 import typer
 
-from ident.headline import axis_headline, comparison_words, term_notes
+from ident.headline import HELD_OUT, axis_headline, comparison_words, saved_model_words, term_notes
 from ident.model import BASE_KEYS
 from ident.results import AxisResult, IdentifyResult
 
@@ -47,8 +47,8 @@ def print_summary(result: IdentifyResult) -> None:
         echo(f"  what to do:      {h.action}")
         m = r.model
         if r.prior_source:
-            echo(f"  details: the model of {r.prior_source} as it was identified (preview shift {r.shift} "
-                 "sample(s)), scored on this recording; not re-identified")
+            echo(f"  details: {saved_model_words(r)}, preview shift {r.shift} sample(s), checked on this "
+                 "recording; not re-identified")
         else:
             echo(f"  details: solver {r.constrained.solver}" + (" + output-error refinement" if r.refined else "")
                  + f", preview shift {r.shift} sample(s)")
@@ -69,7 +69,7 @@ def print_summary(result: IdentifyResult) -> None:
             echo(f"  note: {note}")
         fi = r.fit_identification
         if r.prior_source:
-            echo(f"  tracking-error fit of that model on this recording: {fi.tracking_error_fit_pct:.2f} % "
+            echo(f"  {HELD_OUT} of that model on this recording: {fi.tracking_error_fit_pct:.2f} % "
                  f"(prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm)")
         else:
             echo(f"  tracking-error fit on the identification recording (not held out): {fi.tracking_error_fit_pct:.2f} % "

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident.results import AxisResult, IdentifyResult
+from ident.metrics import FitResult
+from ident.results import AxisResult, AxisTraces, IdentifyResult
 
 __all__ = ["AxisHeadline", "axis_headline", "result_headlines", "comparison_words", "term_notes", "HELD_OUT", "THESIS",
            "tracking_bandwidth_hz", "supported_band_hz", "COHERENT"]
@@ -49,6 +50,10 @@ _ACTIONS = {
                   "drive's limits",
     "external_force": "a load at particular times: look for a collision, cable drag or clamping at those times",
 }
+
+#: the effects the diagnosis knows, in words
+_KNOWN = {"backlash": "backlash", "stribeck": "Stribeck friction", "resonance": "a resonance", "time_delay": "a delay",
+          "cyclic_error": "a cyclic error", "saturation": "saturation", "external_force": "an external force"}
 
 
 @dataclass(frozen=True)
@@ -104,7 +109,29 @@ def _accepted(r: AxisResult) -> dict[str, dict]:
     for c in getattr(d, "candidates", []) or []:  # the external force is not in the augmented model
         if c.accepted and c.effect not in out:
             out[c.effect] = c.parameters
-    return out
+    return {e: p for e, p in out.items() if e not in _carried(r)}  # a saved model's own effects are not missing
+
+
+def _carried(r: AxisResult) -> dict[str, dict]:
+    """The effects of the saved model given with ``--model`` (none for a model identified here)."""
+    return dict(r.prior.effects) if r.prior is not None else {}
+
+
+def saved_model_words(r: AxisResult) -> str:
+    """The saved model ``--model`` gave, as its virtual machine runs it, with the effects it carries."""
+    carried = "; ".join(_effect_words(e, p) for e, p in _carried(r).items())
+    return (f"the model saved in {r.prior_source} as its virtual machine runs it"
+            + (f" (with {carried})" if carried else ""))
+
+
+def _held_out_words(fit: FitResult, traces: AxisTraces | None, where: str) -> str:
+    """The held-out fit on a recording (``where``), its prediction error and the recorded tracking error."""
+    e_rms = ""
+    if traces is not None:
+        e = traces.commanded - traces.actual
+        e_rms = f" of a recorded tracking error of {_um(float(np.sqrt(np.mean(e ** 2))))} rms"
+    return (f"{HELD_OUT} {fit.tracking_error_fit_pct:.2f} %{where} (prediction error "
+            f"{_um(fit.tracking_error_rms_mm)} rms{e_rms})")
 
 
 def _effect_words(effect: str, p: dict, unresolved: dict | None = None) -> str:
@@ -128,8 +155,8 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
     if r.uncertainty is not None and r.uncertainty.is_equivalent:
         ident += ("; an equivalent model: it reproduces the tracking response the recording excites, not the "
                   "drive's physical gains (which parameters the data do not determine: see the parameter table)")
-    if r.prior_source:  # --model: an earlier identification scored here, not re-identified
-        ident = f"nothing new: the model of {r.prior_source} as it was identified, scored on this recording — " + ident
+    if r.prior_source:  # --model: a saved model checked on this recording, not re-identified
+        ident = f"nothing new: {saved_model_words(r)}, checked on this recording — " + ident
     if r.shift:
         ident += f", {_shift_words(r)}"
     band = supported_band_hz(r)
@@ -141,13 +168,12 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
     fv, fi = r.fit_validation, r.fit_identification
     if fv is not None:
         where = f" on {validation_source}" if validation_source else " on the validation recording"
-        e_rms = ""
-        if r.validation_traces is not None:
-            e = r.validation_traces.commanded - r.validation_traces.actual
-            e_rms = f" of a recorded tracking error of {_um(float(np.sqrt(np.mean(e ** 2))))} rms"
-        held = (f"{HELD_OUT} {fv.tracking_error_fit_pct:.2f} %{where} (prediction error "
-                f"{_um(fv.tracking_error_rms_mm)} rms{e_rms})")
+        held = _held_out_words(fv, r.validation_traces, where)
         fig = fv.tracking_error_fit_pct
+    elif r.prior_source:  # the saved model was identified on another recording: this one is held out
+        held = _held_out_words(fi, r.traces, f" on this recording, which the model of {r.prior_source} was not "
+                               f"identified on")
+        fig = fi.tracking_error_fit_pct
     else:
         held = (f"no held-out recording (pass --validate): the fit on the identification recording, which is not "
                 f"held out, is {fi.tracking_error_fit_pct:.2f} % (prediction error {_um(fi.tracking_error_rms_mm)} rms)")
@@ -160,15 +186,22 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
     if d is None:
         missing = "not looked for (the diagnosis was switched off)"
     elif not accepted:
-        missing = ("nothing the data can show: no effect the diagnosis knows (backlash, Stribeck friction, a "
-                   "resonance, a delay, a cyclic error, saturation, an external force) improves the held-out "
-                   "prediction by more than chance")
+        missing = _nothing_missing(r)
     else:
         unresolved = {c.effect: c.unresolved for c in getattr(d, "candidates", []) or []
                       if c.accepted and getattr(c, "unresolved", None)}
         missing = "; ".join(_effect_words(e, p, unresolved.get(e)) for e, p in accepted.items())
     action = _action(r, accepted, fig)
     return AxisHeadline(r.axis, ident, held, missing, action, fig)
+
+
+def _nothing_missing(r: AxisResult) -> str:
+    """The missing physics when the diagnosis accepted no effect: it tried all but a saved model's own."""
+    carried = _carried(r)
+    tried = ", ".join(w for e, w in _KNOWN.items() if e not in carried)
+    head = (f"nothing beyond the {', '.join(e.replace('_', ' ') for e in carried)} the model of {r.prior_source} "
+            f"carries: no other effect" if carried else "nothing the data can show: no effect")
+    return f"{head} the diagnosis knows ({tried}) improves the held-out prediction by more than chance"
 
 
 def _action(r: AxisResult, accepted: dict, fig: float | None) -> str:
@@ -189,6 +222,9 @@ def _action(r: AxisResult, accepted: dict, fig: float | None) -> str:
     if accepted:
         steps.append("the virtual machine (agent simulate / predict / ballbar --machine RESULT.json) already "
                      "includes what was found")
+    elif fig is not None and fig >= 90.0 and r.prior_source:
+        steps.append(f"nothing to fix: the model of {r.prior_source} still holds; keep using it as the virtual "
+                     f"machine (agent predict / simulate / ballbar --machine {r.prior_source})")
     elif fig is not None and fig >= 90.0:
         steps.append("nothing to fix: use the model as the virtual machine (agent predict / simulate / ballbar "
                      "--machine RESULT.json, the file --json wrote)")

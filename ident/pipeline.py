@@ -20,7 +20,7 @@ import numpy as np
 from core.errors import InputError, RecordingError
 from core.reader import load_recording
 from core.recording import Recording
-from ident.axis_model import BASE_KEYS, AxisModel
+from ident.axis_model import AxisModel
 from ident.contour import contour_error
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel
@@ -80,15 +80,15 @@ def _pick_axes(rec: Recording, wanted: Sequence[str] | None) -> list[str]:
     return out
 
 
-def _free_run(model: DriveModel, rec: Recording, axis: str, shift: int) -> np.ndarray:
+def _free_run(model: AxisModel, rec: Recording, axis: str) -> np.ndarray:
     tr = rec.axes[axis]
-    return AxisModel(model, rec.sample_period, shift).simulate(tr.commanded, segment=rec.segment, x0=tr.actual)
+    return model.simulate(tr.commanded, segment=rec.segment, x0=tr.actual)
 
 
 def _fit_or_none(model: DriveModel, rec: Recording, axis: str, shift: int) -> FitResult | None:
     with np.errstate(all="ignore"):
         try:
-            x_hat = _free_run(model, rec, axis, shift)
+            x_hat = _free_run(AxisModel(model, rec.sample_period, shift), rec, axis)
         except (FloatingPointError, ValueError, OverflowError):
             return None
     if not np.all(np.isfinite(x_hat)):
@@ -128,8 +128,9 @@ def _ls_note(ls_model: DriveModel, bounds: Bounds, Ts: float, fit_ls: FitResult 
 
 
 def load_models(path: str | Path) -> dict[str, AxisModel]:
-    """The per-axis models of an identification result JSON (``IdentifyResult.to_json``) as they were
-    identified: eq. 3.3 with the preview shift and sample period of that identification."""
+    """The per-axis models of an identification result JSON (``IdentifyResult.to_json``) as its virtual
+    machine runs them (``virtual_model``): eq. 3.3 with the preview shift and sample period of that
+    identification and the effects its diagnosis accepted."""
     from ident.virtual_machine import check_result_format
 
     name = Path(path).name
@@ -143,8 +144,7 @@ def load_models(path: str | Path) -> dict[str, AxisModel]:
         check_result_format(doc, name)
         out = {}
         for a, r in doc["axes"].items():
-            out[str(a)] = AxisModel(DriveModel(**{k: float(r["model"][k]) for k in BASE_KEYS}),
-                                    float(r["virtual_model"]["sample_period_s"]), int(r["preview_shift_samples"]))
+            out[str(a)] = AxisModel.from_dict(r["virtual_model"])
         return out
     except InputError as exc:
         raise InputError.about("model", str(exc)) from None
@@ -178,7 +178,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
     refined = None
     model = constrained.model
     shift = reg.shift
-    if isinstance(prior, AxisModel):  # scored as it was identified: its own preview shift
+    if isinstance(prior, AxisModel):  # scored as it was saved: its own preview shift and effects
         if not np.isclose(prior.sample_period, Ts, rtol=1e-6):
             raise InputError.about("model", f"the model of axis {axis} was identified at a sample period of "
                                    f"{prior.sample_period * 1e3:g} ms, the recording's is {Ts * 1e3:g} ms")
@@ -198,8 +198,10 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         model, uncertainty = _intervals(model, rec, axis, reg.shift, opts.bounds, polish=refined is not None)
         timings["intervals"] = time.perf_counter() - t0
 
+    # what the fits score and the diagnosis starts from: a saved model with the effects it carries
+    scored = prior if isinstance(prior, AxisModel) else AxisModel(model, Ts, shift)
     t0 = time.perf_counter()
-    x_hat = _free_run(model, rec, axis, shift)
+    x_hat = _free_run(scored, rec, axis)
     fit_id = fit_result(tr.commanded - tr.actual, tr.commanded - x_hat)
     fit_eq = _fit_or_none(constrained.model, rec, axis, reg.shift) or FitResult(float("nan"), float("nan"))
     fit_ls = _fit_or_none(ls.model, rec, axis, reg.shift)
@@ -207,7 +209,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
     fit_val = None
     if val is not None:
         vt = val.axes[axis]
-        xv_hat = _free_run(model, val, axis, shift)
+        xv_hat = _free_run(scored, val, axis)
         fit_val = fit_result(vt.commanded - vt.actual, vt.commanded - xv_hat)
         val_traces = AxisTraces(val.t, vt.commanded + ref, vt.actual + ref, xv_hat + ref, val.segment)
     timings["fits"] = time.perf_counter() - t0
@@ -215,7 +217,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
     diagnosis = None
     if opts.diagnose:
         t0 = time.perf_counter()
-        diagnosis = _diagnose(rec, axis, model, val, against,
+        diagnosis = _diagnose(rec, axis, scored, val, against,
                               (lambda msg: progress(f"axis {axis}: {msg}")) if progress else None,
                               opts.diagnosis_config)
         timings["diagnosis"] = time.perf_counter() - t0
@@ -228,6 +230,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         diagnosis=diagnosis, timings=timings, uncertainty=uncertainty,
         traces=AxisTraces(rec.t, tr.commanded + ref, tr.actual + ref, x_hat + ref, rec.segment),
         validation_traces=val_traces, prior_source=prior_source if prior is not None else None,
+        prior=prior if isinstance(prior, AxisModel) else None,
     )
 
 
@@ -269,13 +272,14 @@ def _intervals(model: DriveModel, rec: Recording, axis: str, shift: int, bounds:
     return model, u
 
 
-def _diagnose(rec: Recording, axis: str, model: DriveModel, val: Recording | None, against: Recording | None,
+def _diagnose(rec: Recording, axis: str, model: AxisModel, val: Recording | None, against: Recording | None,
               progress=None, config=None):
     """Run the diagnosis on the command *as recorded*.
 
     The preview shift of the identification is deliberately not applied: a dead time is
     one of the effects the diagnosis looks for, and a shift would hide it.  The diagnosis
-    re-fits the base model in its own simulator before trying any effect.
+    re-fits the base model in its own simulator before trying any effect; the effects
+    ``model`` carries (a saved model's) stay in that base and are not tried again.
     """
     from ident.diagnosis import diagnose  # imported when used: it is most of ident's import time
 
@@ -354,7 +358,8 @@ def identify(
     against : a simulated recording of the same program; the diagnosis then compares
         virtual and real machine.
     prior : per-axis models to check instead of identifying anew (see :func:`load_models`); an
-        :class:`AxisModel` is scored with its own preview shift, as it was identified.
+        :class:`AxisModel` is scored as it was saved (its own preview shift and effects) on
+        ``recording``, which is then held-out data, and the diagnosis looks for what it lacks.
     prior_source : where ``prior`` came from (a file name), for the summary and the JSON.
     bounds : pole constraints of eq. 3.8 (SPEC §5 defaults).
     refine : output-error refinement after the equation-error solve.

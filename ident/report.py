@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ident.frf_estimate import h1_estimate
-from ident.headline import COHERENT, THESIS, axis_headline, comparison_words, term_notes
+from ident.headline import COHERENT, HELD_OUT, THESIS, axis_headline, comparison_words, term_notes
 from ident.html_page import page, png, pyplot, table, write_html
 from ident.model import BASE_KEYS
 from ident.results import AxisResult, AxisTraces, IdentifyResult
@@ -345,7 +345,8 @@ def _axis_section(r: AxisResult, result: IdentifyResult) -> str:
         fv = r.fit_validation
         rows.append(("held-out fit (validation recording)",
                      f"{fv.tracking_error_fit_pct:.2f} % (prediction error rms {fv.tracking_error_rms_mm * 1e3:.2f} µm)"))
-    rows += [("fit on the identification recording (not held out)",
+    rows += [(f"{HELD_OUT} of the model of {r.prior_source} (this recording)" if r.prior_source
+              else "fit on the identification recording (not held out)",
               f"{fit.tracking_error_fit_pct:.2f} % (prediction error rms {fit.tracking_error_rms_mm * 1e3:.2f} µm)"),
              ("equation-error model before refinement (identification recording)",
               f"{r.fit_constrained.tracking_error_fit_pct:.2f} %"),

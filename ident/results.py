@@ -63,22 +63,25 @@ class AxisResult:
     uncertainty: Uncertainty | None = None
     #: the file of an earlier identification whose model this scores (``--model``); None: identified here
     prior_source: str | None = None
+    #: that saved model as its virtual machine runs it (``model`` and ``shift`` are its own), effects included
+    prior: AxisModel | None = None
 
     @property
     def base_model(self) -> AxisModel:
-        """The identified eq. 3.3 with its preview shift: what the fit figures score."""
-        return AxisModel(self.model, self.sample_period, self.shift)
+        """What the fit figures score: the identified eq. 3.3 with its preview shift, or the
+        saved model given with ``--model`` with the effects it carries."""
+        return self.prior if self.prior is not None else AxisModel(self.model, self.sample_period, self.shift)
 
     @property
     def virtual_model(self) -> AxisModel:
         """What the virtual machine runs: the diagnosed model with its accepted effects, if any.
 
         The diagnosis re-fits the base parameters together with the effects (on the
-        command as recorded, no preview shift); without an accepted effect the virtual
-        machine runs the identified model.
+        command as recorded, no preview shift); unless it added an effect (to those a saved
+        model carries) the virtual machine runs the model the fit figures score.
         """
         aug = getattr(self.diagnosis, "augmented_model", None) or {}
-        if aug.get("effects"):
+        if set(aug.get("effects") or ()) - set(self.prior.effects if self.prior else ()):
             base = aug["base"]
             return AxisModel(DriveModel(**{k: float(base[k]) for k in BASE_KEYS}), self.sample_period, 0,
                              {e: dict(p) for e, p in aug["effects"].items()}, aug.get("controller", "continuous"))

@@ -222,10 +222,11 @@ def test_model_scores_the_old_model_as_it_was_identified(tmp_path, work, result)
     report = tmp_path / "scored.html"
     proc = agent("identify", new, "--model", result, "--no-diagnose", "--json", out, "--report", report)
     assert proc.returncode == 0, proc.stderr
-    assert f"the model of {result.name} as it was identified, scored on this recording" in report.read_text()
+    assert f"the model saved in {result.name} as its virtual machine runs it, checked on this recording" \
+           in report.read_text()
     old = json.loads(result.read_text())["axes"]["X"]
-    assert f"the model of {result.name} as it was identified (preview shift {old['preview_shift_samples']} " \
-           in proc.stdout
+    assert (f"the model saved in {result.name} as its virtual machine runs it, preview shift "
+            f"{old['preview_shift_samples']} sample(s), checked on this recording") in proc.stdout
     assert "equation-error model before refinement" not in proc.stdout  # no fresh-fit lines passed off as its
     scored = json.loads(out.read_text())["axes"]["X"]
     assert scored["model_from"] == result.name

@@ -20,7 +20,7 @@ def identify(
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the JSON result (docs/spec.md §6) here."),
     report: Optional[Path] = typer.Option(None, "--report", help="Write a self-contained HTML report here."),
     against: Optional[Path] = typer.Option(None, "--against", help="Simulated log of the same program: compare virtual vs real machine."),
-    model: Optional[Path] = typer.Option(None, "--model", help="Score the model of an earlier --json as it was identified (its own preview shift) instead of identifying anew."),
+    model: Optional[Path] = typer.Option(None, "--model", help="Check the model an earlier --json saved (as its virtual machine runs it: own preview shift and effects) on LOG, held out, instead of identifying anew."),
     refine: bool = typer.Option(True, "--refine/--no-refine", help="Output-error refinement after the equation-error solve."),
     diagnose: bool = typer.Option(True, "--diagnose/--no-diagnose", help="Locate and explain model/recording mismatch."),
     p_min_hz: float = typer.Option(0.2, "--p-min-hz", help="Lower bound on the real pole p, Hz (eq. 3.8)."),

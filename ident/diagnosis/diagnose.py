@@ -59,6 +59,7 @@ from ident.diagnosis.intervals import at_bound, effect_intervals
 from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, rest_residual, simulate_spec, sse
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
+from ident.axis_model import AxisModel
 from ident.model import BASE_KEYS, base_vector
 
 __all__ = ["Candidate", "Diagnosis", "diagnose"]
@@ -110,8 +111,8 @@ class Diagnosis:
     fit_before_pct, fit_after_pct : held-out tracking-error fit % of the base model and of
     the model with the accepted effects.
     elapsed_s : wall time of the diagnosis, s.
-    augmented_model : base parameters and accepted effects' parameters, fitted on all the
-    identification data.
+    augmented_model : base parameters and the parameters of the accepted effects (and of
+    those the given model carried), fitted on all the identification data.
     traces : arrays for before/after overlays (not in ``to_dict``): ``t`` (s), ``x_r``,
     ``x``, ``x_hat_before``, ``x_hat_after`` (mm), and the same with a ``validation_``
     prefix when a validation recording was given.
@@ -169,6 +170,16 @@ def _theta(model: Any) -> np.ndarray:
     if not np.all(np.isfinite(th)):
         raise InputError(f"model parameters must be finite, got {th.tolist()}")
     return th
+
+
+def _given(model: Any) -> ModelSpec:
+    """The model the diagnosis starts from: eq. 3.3, with the effects and control law an
+    :class:`AxisModel` carries (a saved virtual machine's, ``agent identify --model``): those
+    are part of every reference, not candidates — the diagnosis looks for what it lacks."""
+    if not isinstance(model, AxisModel):
+        return ModelSpec(_theta(model))
+    _, _, ep, modes = model.spec_arrays()
+    return ModelSpec(_theta(model.model), tuple(e for e in EFFECTS if e in model.effects), ep, modes)
 
 
 def _check(name: str, x_r: np.ndarray, x: np.ndarray, segment: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -677,7 +688,8 @@ def diagnose(
         Commanded and recorded actual position, mm.
     Ts : float
         Sample period, s.
-    model : DriveModel (or mapping) with a1, a2, a3, b0, b1, b2, d0, d1 of eq. 3.3.
+    model : DriveModel (or mapping) with a1, a2, a3, b0, b1, b2, d0, d1 of eq. 3.3, or an
+        AxisModel: the effects it carries are then in the reference and not tried again.
     segment : ndarray of int (N,), optional
         Program/segment index per sample; the simulation restarts at each change.
     validation : (x_r2, x2, segment2), optional
@@ -707,7 +719,8 @@ def diagnose(
     unknown = [e for e in effects if e not in EFFECTS]
     if unknown:
         raise InputError(f"unknown effect {unknown[0]!r}; known: {', '.join(EFFECTS)}")
-    theta = _theta(model)
+    given = _given(model)
+    effects = tuple(e for e in effects if e not in given.effects)
     starts = segment_starts(x_r.size, segment)
     full = make_chunk(x_r, x, Ts, starts)
 
@@ -720,20 +733,21 @@ def diagnose(
     # algebra is in ident.fixed_order)
     try:
         with threadpool_limits(limits=1, user_api="blas"):
-            return _absolute_phase(_diagnose(x_r, x, Ts, theta, segment, starts, full, validation, against,
+            return _absolute_phase(_diagnose(x_r, x, Ts, given, segment, starts, full, validation, against,
                                              effects, cfg, say, pool, t0), reference)
     finally:
         pool.shutdown()
 
 
-def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segment, starts: np.ndarray,
+def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, given: ModelSpec, segment, starts: np.ndarray,
               full: Chunk, validation, against, effects: tuple[str, ...], cfg: DiagnosisConfig,
               say: Callable[[str], None], pool: ThreadPoolExecutor, t0: float) -> Diagnosis:
-    """Steps 1–6 of :func:`diagnose` on checked input, every independent fit a job of ``pool``."""
+    """Steps 1–6 of :func:`diagnose` on checked input, every independent fit a job of ``pool``;
+    ``given`` the model to start from, its effects (``given.effects``) kept in every reference."""
     say("re-fitting the base model in free run")
     # 1. compare: the base model re-fitted in free run on all identification data
     # (twice: the restart re-scales the parameters after a long first move)
-    base = fit_base(ModelSpec(theta), full, pool, cfg=cfg)
+    base = fit_base(given, full, pool, cfg=cfg)
     # the base model is eq. 3.3 with a continuous control law or the same law sampled and
     # held (a digital drive), its feed-forward taking the command's derivatives as an
     # interpolator hands them over or causally, as the drive receives the commands:
@@ -886,7 +900,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
     # carried the base parameters into a better one.  Re-fit the base model from every
     # candidate's base parameters (effect removed) and compare with the best base found,
     # so an effect is credited only with what the effect itself explains.
-    base_sc = _best_reference([base_sc] + [singles[e] for e in effects], (), folds, pool, scored, cfg, test_sse)
+    base_sc = _best_reference([base_sc] + [singles[e] for e in effects], given.effects, folds, pool, scored, cfg,
+                              test_sse)
     # the lag of sampling (at most a sample: TimeDelay.within_inherent_lag) is part of
     # the base, not an effect: when a dead time within it earns its parameter by
     # the acceptance rule, the base with that lag is the reference every effect must beat
@@ -935,8 +950,8 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
 
         pairs = {eff: scored([fit_pair(eff, i) for i in range(len(folds))]) for eff in others}
         if pairs:
-            current_sc = _best_reference([current_sc] + list(pairs.values()), (best_name,), folds, pool,
-                                         scored, cfg, test_sse)
+            current_sc = _best_reference([current_sc] + list(pairs.values()), given.effects + (best_name,), folds,
+                                         pool, scored, cfg, test_sse)
         for eff, sc in pairs.items():
             ok, gain, folds_ok, ev, why = _judge(eff, sc, current_sc, full, noise, cfg)
             round2.append((eff, sc, gain, folds_ok, ok, why, ev))
@@ -1026,7 +1041,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.ndarray, segm
             "validation_x_hat_after": simulate_spec(current_sc.specs[0], te),
         })
     aug = {"base": dict(zip(BASE_KEYS, map(float, final.theta))),
-           "effects": {e: effect_parameters(final, e, Ts) for e in accepted},
+           "effects": {e: effect_parameters(final, e, Ts) for e in given.effects + tuple(accepted)},
            "controller": CONTROLLERS[int(final.modes[MODE_SLOTS["controller"]])],
            "held_out": scheme}
     named = accepted + (["external_force"] if external is not None and external.accepted else [])
