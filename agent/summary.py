@@ -55,6 +55,11 @@ def print_summary(result: IdentifyResult) -> None:
         echo("  model (eq. 3.3): " + ", ".join(f"{k}={_fmt(getattr(m, k))}" for k in BASE_KEYS))
         echo("  poles:  " + "; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.poles()))
         echo("  zeros:  " + ("; ".join(f"{f:.2f} Hz ζ={d:.2f}" for f, d in m.zeros()) or "none"))
+        if r.runs_refit:  # the diagnosis's re-fit, what --machine runs
+            vm = r.virtual_model
+            echo(f"  virtual machine: eq. 3.3 re-fitted on a {vm.controller.replace('_', ' ')} control law"
+                 + (f" with {', '.join(e.replace('_', ' ') for e in vm.effects)}" if vm.effects else "") + ": "
+                 + ", ".join(f"{k}={_fmt(getattr(vm.model, k))}" for k in BASE_KEYS))
         if r.prior_source:
             pass  # the constraints of a fit made elsewhere are in that file's JSON
         elif r.constrained.solver == "ls":
@@ -84,4 +89,8 @@ def print_summary(result: IdentifyResult) -> None:
         echo(f"\ncontour error ({c['source']} recording, axes {'/'.join(c['axes'])}): measured max "
              f"{c['measured']['max_abs_mm'] * 1e3:.2f} µm, predicted max {c['predicted']['max_abs_mm'] * 1e3:.2f} µm, "
              f"prediction error rms {c['prediction_error']['rms_mm'] * 1e3:.2f} µm")
-    echo(f"\ntotal {result.elapsed_s:.2f} s")
+    from ident.kernel import compiled_in_this_process
+
+    echo(f"\ntotal {result.elapsed_s:.2f} s" + (" (most of it compiling the simulator, once after an install: the "
+                                                "next runs load it from numba's cache)"
+                                                if compiled_in_this_process() else ""))

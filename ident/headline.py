@@ -145,12 +145,25 @@ def _effect_words(effect: str, p: dict, unresolved: dict | None = None) -> str:
     return EFFECT_MODELS[effect].words(p, None, unresolved) if effect in EFFECT_MODELS else effect.replace("_", " ")
 
 
+def _friction_words(r: AxisResult) -> str:
+    """eq. 3.3's friction terms d0 / d1, called Coulomb friction only where they can be: a term
+    that pushes the axis along its motion, or one the data do not determine, is said to be so."""
+    m = r.model
+    told = f"{m.d0:.3g} / {m.d1:.3g} mm/s² for positive / negative speed"
+    if m.d0 < 0 or m.d1 > 0:
+        return f"friction terms {told}, which push the axis along its motion: not Coulomb friction"
+    loose = [k for k in ("d0", "d1") if r.uncertainty is not None and k in r.uncertainty.undetermined]
+    if loose:
+        return f"Coulomb friction {told}, {' and '.join(loose)} not determined by the data"
+    return f"Coulomb friction {told}"
+
+
 def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHeadline:
     """The answer for axis ``r``: identified what, held-out fit, missing physics, what to do."""
     m = r.model
     bw = tracking_bandwidth_hz(r)
-    ident = (f"the closed-loop drive model of eq. 3.3 (tracking and disturbance transfer functions, Coulomb "
-             f"friction {m.d0:.3g} / {m.d1:.3g} mm/s² for positive / negative speed): tracking bandwidth "
+    ident = (f"the closed-loop drive model of eq. 3.3 (tracking and disturbance transfer functions, "
+             f"{_friction_words(r)}): tracking bandwidth "
              + (f"{bw:.3g} Hz (−3 dB)" if bw else "beyond the Nyquist frequency"))
     if r.uncertainty is not None and r.uncertainty.is_equivalent:
         ident += ("; an equivalent model: it reproduces the tracking response the recording excites, not the "
@@ -183,6 +196,10 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
         name = HELD_OUT if scheme == "validation recording" else "cross-validated fit"
         held += (f"; with the diagnosed physics added (what the virtual machine runs) the {name} is "
                  f"{d.fit_after_pct:.2f} %")
+    elif r.refit_predicts_better:
+        controller = (d.augmented_model or {}).get("controller", "continuous").replace("_", " ")
+        held += (f"; the diagnosis's re-fit of eq. 3.3 on a {controller} control law predicts it better, "
+                 f"{d.fit_after_pct:.2f} %: the virtual machine runs that")
     if d is None:
         missing = "not looked for (the diagnosis was switched off)"
     elif not accepted:

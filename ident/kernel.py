@@ -23,7 +23,7 @@ from core.effects import EFFECT_NAMES
 from ident.complex_step import cos, div, exp, sin
 from ident.discretisation import balanced, foh_blocks
 
-__all__ = ["EFFECTS", "EP_INDEX", "N_EP", "MODE_SLOTS", "N_MODES", "CONTACT_HZ", "CONTACT_DAMPING"]
+__all__ = ["EFFECTS", "EP_INDEX", "N_EP", "MODE_SLOTS", "N_MODES", "CONTACT_HZ", "CONTACT_DAMPING", "compiled_in_this_process"]
 
 #: The effects of SPEC §7 in a fixed order; the flag vector follows it (the axis model's
 #: vocabulary, one list for the model and its simulator).
@@ -1076,6 +1076,13 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
         for p in range(P):
             if tau[p].real > 0.0:
                 _delay_output(OUT[p], starts, tau[p], Ts)
+
+
+def compiled_in_this_process() -> bool:
+    """Whether the simulator kernel was compiled in this process rather than loaded from
+    numba's on-disk cache: the first run after an install (or a change of the kernel) spends
+    about 40 s per number type compiling it, in whichever stage first simulates."""
+    return bool(_kernel_many.stats.cache_misses)
 
 
 def _padded_modes(modes: np.ndarray) -> np.ndarray:
