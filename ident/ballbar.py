@@ -43,7 +43,7 @@ import numpy as np
 
 from core.errors import InputError
 
-__all__ = ["BallbarRun", "ballbar_run", "Reversal", "AxisReversals", "RunFeatures",
+__all__ = ["BallbarRun", "ballbar_run", "check_test_size", "Reversal", "AxisReversals", "RunFeatures",
            "BallbarResult", "analyse_ballbar", "words", "plot_ballbar"]
 
 #: Commanded path speed below this fraction of the feed is feed-in/feed-out (not used).
@@ -90,6 +90,13 @@ class BallbarRun:
         return 1 if self.direction == "ccw" else -1
 
 
+def check_test_size(radius: float, feed: float) -> None:
+    """Refuse a test radius or feed that is not positive, naming the one that is not."""
+    for name, value, unit in (("radius", radius, "mm"), ("feed", feed, "mm/s")):
+        if not value > 0:
+            raise InputError.about(name, f"{name} must be > 0 {unit}, got {value:g}")
+
+
 def ballbar_run(x: np.ndarray, y: np.ndarray, *, centre: tuple[float, float], radius: float,
                 feed: float, direction: str, xc: np.ndarray | None = None,
                 yc: np.ndarray | None = None, dt: float | None = None) -> BallbarRun:
@@ -111,8 +118,7 @@ def ballbar_run(x: np.ndarray, y: np.ndarray, *, centre: tuple[float, float], ra
     """
     if direction not in ("ccw", "cw"):
         raise InputError.about("direction", f"direction {direction!r}: choose ccw or cw")
-    if not radius > 0 or not feed > 0:
-        raise InputError(f"radius {radius} mm and feed {feed} mm/s must be positive")
+    check_test_size(radius, feed)
     x, y = np.asarray(x, float).ravel(), np.asarray(y, float).ravel()
     if x.shape != y.shape or x.size < 20:
         raise InputError(f"x has {x.size} samples and y {y.size}: need two equal arrays of ≥ 20")

@@ -38,7 +38,7 @@ from core.recording import Recording
 from gcode_gen.commands import CommandedRun
 from gcode_gen.program import Block, Toolpath
 from ident.axis_model import AxisModel
-from ident.ballbar import BallbarResult, BallbarRun, analyse_ballbar, ballbar_run, words
+from ident.ballbar import BallbarResult, BallbarRun, analyse_ballbar, ballbar_run, check_test_size, words
 from ident.virtual_machine import VirtualMachine
 
 __all__ = ["SyntheticBallbar", "run_ballbar", "ballbar_of_recording", "ballbar_program", "axis_lag_s", "START_DEG",
@@ -211,8 +211,7 @@ def run_ballbar(machine: VirtualMachine, *, radius: float = DEFAULT_RADIUS_MM, f
     if len(axes) != 2 or missing:
         raise InputError.about("axes", f"a ballbar test needs two axes of {machine.name} "
                                        f"(it has {', '.join(machine.axes)}), got {', '.join(axes)}")
-    if not (radius > 0 and feed > 0):
-        raise InputError(f"radius {radius} mm and feed {feed} mm/s must be positive")
+    check_test_size(radius, feed)
     result = analyse_ballbar(_runs(machine, axes, radius, feed, centre, lead_deg), axes)
     f_hz = feed / (2 * math.pi * radius)
     model_dtau = 1e3 * (axis_lag_s(machine.axes[axes[0]], f_hz) - axis_lag_s(machine.axes[axes[1]], f_hz))

@@ -83,6 +83,10 @@ def test_agent_ballbar_prints_the_reading_and_writes_a_self_contained_report(tmp
     assert math.isclose(out["tests"][0]["radius_mm"], 100.0)
     bad = CliRunner().invoke(cli.app, ["ballbar", "--machine", str(result), "--axes", "X,Z"])
     assert bad.exit_code == 2 and bad.output.startswith("error:") and len(bad.output.strip().splitlines()) == 1
+    for option, value, told in (("--radius", "-5", "error: --radius must be > 0 mm, got -5"),
+                                ("--feed", "0", "error: --feed must be > 0 mm/s, got 0")):
+        bad = CliRunner().invoke(cli.app, ["ballbar", "--machine", str(result), option, value])
+        assert bad.exit_code == 2 and bad.output.strip() == told  # the one option that is wrong, alone
 
 
 def test_generated_ballbar_programs_recorded_on_the_drives_overlay_the_prediction(tmp_path, mismatched):

@@ -15,7 +15,7 @@ def ballbar(
     machine: List[Path] = typer.Option([], "--machine", help="Result JSON of agent identify --json; repeat to compare."),
     set_: List[str] = typer.Option([], "--set", help="Override a parameter, AXIS.PARAM=VALUE: a second machine to compare."),
     radius: float = typer.Option(100.0, "--radius", help="Ballbar length (circle radius), mm."),
-    feed: float = typer.Option(1000.0 / 60.0, "--feed", help="Test feed, mm/s (default 1000 mm/min)."),
+    feed: float = typer.Option(1000.0 / 60.0, "--feed", help="Test feed, mm/s.", show_default="16.67 = 1000 mm/min"),
     axes: str = typer.Option("X,Y", "--axes", help="The plane: two axis letters."),
     centre: str = typer.Option("0,0", "--centre", help="Circle centre in the plane, mm."),
     center: Optional[str] = typer.Option(None, "--center", hidden=True),  # the other spelling, kept working
