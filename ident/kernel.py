@@ -1082,7 +1082,8 @@ def compiled_in_this_process() -> bool:
     """Whether the simulator kernel was compiled in this process rather than loaded from
     numba's on-disk cache: the first run after an install (or a change of the kernel) spends
     about 40 s per number type compiling it, in whichever stage first simulates."""
-    return bool(_kernel_many.stats.cache_misses)
+    stats = getattr(_kernel_many, "stats", None)  # none when numba's JIT is switched off
+    return bool(stats is not None and stats.cache_misses)
 
 
 def _padded_modes(modes: np.ndarray) -> np.ndarray:
