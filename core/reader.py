@@ -44,9 +44,12 @@ def load_recording(path: str | Path) -> Recording:
     else:
         with open(path, "rb") as fh:
             head = fh.read(8)
-        if not head.startswith(b"\x89MCAP") and not head.lstrip(b' \t"').startswith(b"t_s"):  # a part program, …
+        if head.startswith(b"\x89MCAP"):
+            rec = load_mcap(path)
+        elif head.lstrip(b' \t"').startswith(b"t_s"):
+            rec = load_csv(path)
+        else:  # a part program, a .mat file, …
             raise RecordingError(f"{path}: not a recording (an .mcap log, or a CSV whose first column is t_s)")
-        rec = load_mcap(path) if head.startswith(b"\x89MCAP") else load_csv(path)
     check_recording(rec, str(path))
     rec.metadata["source"] = str(path)
     return rec

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.effects import EFFECTS as REGISTRY
 from ident.metrics import FitResult
 from ident.results import AxisResult, AxisTraces, IdentifyResult
 
@@ -50,10 +51,6 @@ _ACTIONS = {
                   "drive's limits",
     "external_force": "a load at particular times: look for a collision, cable drag or clamping at those times",
 }
-
-#: the effects the diagnosis knows, in words
-_KNOWN = {"backlash": "backlash", "stribeck": "Stribeck friction", "resonance": "a resonance", "time_delay": "a delay",
-          "cyclic_error": "a cyclic error", "saturation": "saturation", "external_force": "an external force"}
 
 
 @dataclass(frozen=True)
@@ -109,7 +106,8 @@ def _accepted(r: AxisResult) -> dict[str, dict]:
     for c in getattr(d, "candidates", []) or []:  # the external force is not in the augmented model
         if c.accepted and c.effect not in out:
             out[c.effect] = c.parameters
-    return {e: p for e, p in out.items() if e not in _carried(r)}  # a saved model's own effects are not missing
+    carried = _carried(r)  # a saved model's own effects are not missing
+    return {e: p for e, p in out.items() if e not in carried}
 
 
 def _carried(r: AxisResult) -> dict[str, dict]:
@@ -215,8 +213,8 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
 def _nothing_missing(r: AxisResult) -> str:
     """The missing physics when the diagnosis accepted no effect: it tried all but a saved model's own."""
     carried = _carried(r)
-    tried = ", ".join(w for e, w in _KNOWN.items() if e not in carried)
-    head = (f"nothing beyond the {', '.join(e.replace('_', ' ') for e in carried)} the model of {r.prior_source} "
+    tried = ", ".join(e.words for name, e in REGISTRY.items() if name not in carried)
+    head = (f"nothing beyond the {', '.join(REGISTRY[e].words for e in carried)} the model of {r.prior_source} "
             f"carries: no other effect" if carried else "nothing the data can show: no effect")
     return f"{head} the diagnosis knows ({tried}) improves the held-out prediction by more than chance"
 

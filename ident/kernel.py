@@ -23,7 +23,8 @@ from core.effects import EFFECT_NAMES
 from ident.complex_step import cos, div, exp, sin
 from ident.discretisation import balanced, foh_blocks
 
-__all__ = ["EFFECTS", "EP_INDEX", "N_EP", "MODE_SLOTS", "N_MODES", "CONTACT_HZ", "CONTACT_DAMPING", "compiled_in_this_process"]
+__all__ = ["EFFECTS", "EP_INDEX", "N_EP", "MODE_SLOTS", "N_MODES", "CONTACT_HZ", "CONTACT_DAMPING",
+           "compiled_in_this_process"]
 
 #: The effects of SPEC §7 in a fixed order; the flag vector follows it (the axis model's
 #: vocabulary, one list for the model and its simulator).
