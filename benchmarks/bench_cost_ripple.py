@@ -7,8 +7,9 @@ weighted cost is evaluated on 41 points across ±0.5 % of a1, b1 and d0, then of
 effect's own parameters (a second table; the effect's parameters stay at their true values
 while the base is off).  Printed per parameter: the ripple (standard deviation of the cost about its quadratic trend, relative to
 the cost) and the exact slope over the trend's slope at the centre (1: the exact slope is
-the trend's).  This is what :func:`ident.diagnosis.candidates.rippled` rests on: a fit of a
-model whose exact slope is not the trend's reads the trend by differences.
+the trend's).  A run discontinuous in a parameter (a switch decided for a whole sample or
+sub-step) shows as a ripple with a slope ratio far from 1; a continuous but very
+sensitive run (a loop that clips often, over a whole recording) as a large ripple too.
 
     python benchmarks/bench_cost_ripple.py
 """

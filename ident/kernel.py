@@ -168,19 +168,42 @@ def _delay_output(out, starts, tau, Ts):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _clipped(u, lim, slope, v, ig, windup):
-    """``u`` clipped to ``±lim − slope·v`` (saturation) and whether the integral runs on: always
-    with ``windup``, else only while its error ``ig`` would not wind the clip up (conditional
-    integration).  The drive clips its own output ``u + slope·v``, which carries the plant's
-    viscous share of the speed term eq. 3.3 folds into a1: the limit of u falls with speed in
-    the direction it pushes."""
+def _clip(u, lim, slope, v):
+    """``u`` clipped to ``±lim − slope·v`` (saturation).  The drive clips its own output
+    ``u + slope·v``, which carries the plant's viscous share of the speed term eq. 3.3 folds
+    into a1: the limit of u falls with speed in the direction it pushes."""
     hi = lim - slope * v
     lo = -lim - slope * v
     if u.real > hi.real:
-        return hi, windup or ig.real <= 0.0
+        return hi
     if u.real < lo.real:
-        return lo, windup or ig.real >= 0.0
-    return u, True
+        return lo
+    return u
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _integral_share(u0, du, lim, slope, v, windup):
+    """The share in [0, 1] of its increment over a step that the integral takes (conditional
+    integration, a step of the sampled controller or of a sub-step): all of it with
+    ``windup``, or where the loop's output ``u0`` (before the increment) moved by the
+    increment's part ``du`` stays inside the clip (:func:`_clip`) or moves back towards it;
+    else the share that ends the step with the output on the limit — none where ``u0`` lies
+    beyond it already.  Continuous in the parameters, as the exact step's sliding on the
+    limit is (:func:`_sliding_phase`): a freeze of the whole increment at once jumps by it
+    wherever the output grazes the limit, and the cost ripples at every such step
+    (benchmarks/bench_cost_ripple.py)."""
+    one = 1.0 + 0.0 * du
+    if windup:
+        return one
+    c = _side(u0 + du, lim, slope, v)
+    if c == 0 or c * du.real <= 0.0:
+        return one
+    al = div(c * lim - slope * v - u0, du)
+    if al.real < 0.0:
+        return 0.0 * al
+    if al.real > 1.0:
+        return one
+    return al
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -310,7 +333,7 @@ def _drive(ua, z, x, vv, xw, a1, a2, a3, psi):
 @njit(cache=True, nogil=True, inline="always")
 def _beyond(u, c, lim, slope, vv):
     """How far the drive output ``u`` lies beyond the clip of side ``c`` (±1; ``c·lim − slope·v``,
-    :func:`_clipped`): positive when that side clips it."""
+    :func:`_clip`): positive when that side clips it."""
     return c * u - lim + c * slope * vv
 
 
@@ -350,7 +373,7 @@ def _held_phase(z, x, vv, xw, s, c, f, xa, sr, a2, a3, psi, windup, d0, d1, rs, 
     the held force ``f`` (the clip less any cyclic force; friction and its Karnopp stop as
     :func:`_friction_step`), the integral by the trapezoid over the part of the phase where it
     runs on — always with ``windup``, else while its error would not wind the clip up
-    (conditional integration, :func:`_clipped`), the instant its error changes sign
+    (conditional integration, :func:`_integral_share`), the instant its error changes sign
     interpolated — and ``x_w`` following x over that part."""
     vn = _friction_step(vv, f, s, 1.0, d0, d1, rs, on_st, vs)
     xn = x + 0.5 * s * (vv + vn)
@@ -739,8 +762,8 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
     hk = np.zeros(P, dtype=np.bool_)
     xm_prev = np.zeros_like(a1)
     xw = np.zeros_like(a1)
-    wind_x = np.ones(P, dtype=np.bool_)
-    wind_h = np.ones(P, dtype=np.bool_)
+    wind_x = np.ones_like(a1)  # the share of its increment the integral takes (_integral_share)
+    wind_h = np.ones_like(a1)
     first = np.ones(P, dtype=np.bool_)
     u_h = np.zeros_like(a1)
     u_last = np.zeros_like(a1)
@@ -905,20 +928,20 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         z, x, vv, md, xw[p] = _saturated_step(
                             z, x, vv, md, xw[p], h, PH[p], GA[p], GB[p], xa, ua, sr, suc, cyc, a1[p], a2[p], a3[p],
                             psi[p], lim[p], lsl[p], sa_windup, d0[p], d1[p], rs[p], on_st, vs[p])
-                        wx = False  # x_w moved with the step
+                        wx = 0.0 * ua  # x_w moved with the step
                     else:
                         ulin = ua + a3[p] * z - a2[p] * x - a1[p] * vv
                         g = 0.0 * ua  # the effects' acceleration, held
-                        wx = True
+                        wx = 1.0 + 0.0 * ua  # the share of the integral's increment taken (_integral_share)
                         held = False  # the drive's output clipped: the loop does not act inside the sub-step
                         if extra[p]:
                             u = ulin - a2[p] * psi[p] * (xw[p] - x)
                             if on_sa:
-                                ig = xa - x if psi[p].real == 0.0 else a3[p] * (xa - x) - psi[p] * a2[p] * vv
+                                du = h * (a3[p] * (xa - x) - psi[p] * a2[p] * vv)
+                                wx = _integral_share(u, du, lim[p], lsl[p], vv, sa_windup)
                                 u_free = u
-                                u, wind = _clipped(u, lim[p], lsl[p], vv, ig, sa_windup)
+                                u = _clip(u, lim[p], lsl[p], vv)
                                 held = u.real != u_free.real
-                                wx = wind
                             if want_u and j == 0:
                                 OUT_U[p, k] = u
                             if td_loop:
@@ -942,16 +965,14 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                             # integral by the trapezoid.
                             vn = _friction_step(vv, u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
                             xn = x + 0.5 * h * (vv + vn)
-                            if wx:
-                                z = z + h * (xa + 0.5 * sr * h) - 0.5 * h * (x + xn)
+                            z = z + wx * (h * (xa + 0.5 * sr * h) - 0.5 * h * (x + xn))
                             x = xn
                             vv = vn
                             md = _direction(vn)
                         else:
                             z, x, vv, md = _free_phase(z, x, vv, md, h, PH[p], GA[p], GB[p], xa, ua, sr, suc, g,
                                                        a1[p], a2[p], a3[p], d0[p], d1[p], rs[p], on_st, vs[p])
-                    if wx:
-                        xw[p] += x - x_old
+                    xw[p] += wx * (x - x_old)
                     if on_bl:
                         if (x - xt[p]).real > half[p].real:
                             xt[p] = x - half[p]
@@ -990,13 +1011,17 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         else:
                             uh = b0[p] * ar[k] + b1[p] * vr[k]
                         uh += b2[p] * xr[k] + a3[p] * ei_new - a2[p] * xp - a1[p] * vfb
-                        wh = True
+                        wh = 1.0 + 0.0 * uh
                         if on_sa:
-                            ig = (xr[k] - xfb if psi[p].real == 0.0
-                                  else a3[p] * (xr[k] - xfb) - psi[p] * a2[p] * vfb)
-                            uh, wh = _clipped(uh, lim[p], lsl[p], vfb, ig, sa_windup)
-                        if wh:
-                            ei[p] = ei_new
+                            # conditional integration: the share of the increment that keeps the
+                            # output inside the clip (its velocity share: x_w over the sample)
+                            de = Ts * (xr[k] - xfb)
+                            u0 = uh - a3[p] * de
+                            wh = _integral_share(u0, a3[p] * de - Ts * psi[p] * a2[p] * vfb, lim[p], lsl[p], vfb,
+                                                 sa_windup)
+                            ei_new = ei[p] + wh * de
+                            uh = _clip(u0 + wh * a3[p] * de, lim[p], lsl[p], vfb)
+                        ei[p] = ei_new
                         u = uh if first[p] or two_exact else 0.5 * (u_last[p] + uh)
                         u_last[p] = uh
                         u_h[p] = uh
@@ -1004,17 +1029,17 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                         first[p] = False
                     else:
                         u = u_h[p]
-                    wind = False
+                    wind = 0.0 * u
                     wind_x[p] = wind_h[p]
                 else:  # (continuous and not exact: a two-mass drive) the velocity at the kick's instant
                     vk_ = v[p] + 0.5 * h * am[p]
                     u = b0[p] * arj + b1[p] * vrj + b2[p] * xrj + a3[p] * ei[p] - a2[p] * xp - a1[p] * vk_
-                    wind = True
-                    wind_x[p] = True
+                    wind = 1.0 + 0.0 * u
                     if on_sa:
-                        ig = xrj - xfb if psi[p].real == 0.0 else a3[p] * (xrj - xfb) - psi[p] * a2[p] * vk_
-                        u, wind = _clipped(u, lim[p], lsl[p], vk_, ig, sa_windup)
-                        wind_x[p] = wind
+                        wind = _integral_share(u, h * (a3[p] * (xrj - xfb) - psi[p] * a2[p] * vk_), lim[p], lsl[p],
+                                               vk_, sa_windup)
+                        u = _clip(u, lim[p], lsl[p], vk_)
+                    wind_x[p] = wind
                 if want_u and j == 0:
                     OUT_U[p, k] = u
                 if td_loop:
@@ -1027,8 +1052,7 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                          TM[p, 8], TM[p, 9], TM[p, 10], TM[p, 11], TM[p, 12])
                     xm[p], v[p], xt[p], vt[p] = _two_mass_step(xm[p], v[p], xt[p], vt[p], u, h + 0.0 * u, mu[p],
                                                                kc[p], cdmp[p], C, d0[p], d1[p], rs[p], on_st, vs[p])
-                    if wind_x[p]:
-                        xw[p] += xm[p] - x_old
+                    xw[p] += wind_x[p] * (xm[p] - x_old)
                     continue
                 if two:
                     dl = xm[p] - xt[p]
@@ -1051,19 +1075,16 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     vt[p] = vtn
                     xm[p] += h * vn
                     xt[p] += h * vtn
-                    if wind:  # the integral by the midpoint of the feedback's move
-                        ei[p] += h * (xrj + 0.5 * h * sr - xfb - 0.5 * h * (vn if fb_motor else vtn))
-                    if wind_x[p]:
-                        xw[p] += h * vn
+                    # the integral by the midpoint of the feedback's move
+                    ei[p] += wind * h * (xrj + 0.5 * h * sr - xfb - 0.5 * h * (vn if fb_motor else vtn))
+                    xw[p] += wind_x[p] * h * vn
                     continue
                 vn = _friction_step(v[p], u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
                 acc = div(vn - v[p], h)
                 v[p] = vn
                 xm[p] += h * vn
-                if wind:
-                    ei[p] += h * (xrj - xfb)
-                if wind_x[p]:
-                    xw[p] += h * vn
+                ei[p] += wind * h * (xrj - xfb)
+                xw[p] += wind_x[p] * h * vn
                 if on_bl:
                     if (xm[p] - xt[p]).real > half[p].real:
                         xt[p] = xm[p] - half[p]

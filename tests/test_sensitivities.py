@@ -121,36 +121,30 @@ def test_a_fit_with_the_exact_jacobian_gets_where_differences_get(monkeypatch):
     assert abs(exact.ep[d] - 0.0023) < 0.2 * abs(start.ep[d] - 0.0023)
 
 
-def test_a_model_whose_cost_ripples_is_fitted_by_differences():
-    """A saturation on the sampled controller clips at samples: its exact slope is a ripple's
-    (benchmarks/bench_cost_ripple.py), so its fit reads the trend by differences.  On the
-    exact step (continuous controller) the clip's instants are located inside the sub-step,
-    and a two-mass backlash's contact likewise (tests/test_kernel_clip_events.py,
-    tests/test_kernel_contact_events.py): their exact slope is the trend's."""
-    from ident.diagnosis.candidates import rippled
+def test_a_saturated_sampled_loops_exact_slope_is_its_costs_trend():
+    """The sampled controller's conditional integration takes the share of its increment that
+    puts the output on the limit (ident.kernel._integral_share), so the free run is
+    continuous in the parameters: the cost over ±0.5 % of a1 lies on its trend and the
+    exact slope is the trend's (benchmarks/bench_cost_ripple.py's measure).  A freeze of
+    the whole increment at once jumped by a3·Ts·e wherever the output grazed the limit at
+    a sample: ripple 0.14 of the cost, exact slope −0.7 × the trend's."""
+    from benchmarks.bench_cost_ripple import MODELS, THETA as PID, TS, ripple
+    from ident.diagnosis.augmented import segment_starts
+    from ident.diagnosis.spec import make_chunk, simulate_spec
+    from tests.test_diagnosis_units import point_to_point
 
-    sampled = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
-    sampled.modes[4] = 1
-    assert rippled(sampled)
-    assert not rippled(ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0))
-    assert not rippled(ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": 0.01, "motor_fraction": 0.7}, 1))
-    assert not rippled(ModelSpec(THETA.copy()).with_effect("backlash", {"gap_mm": 0.01}, 0))
-    assert not rippled(ModelSpec(THETA.copy()).with_effect("stribeck", {"static_to_coulomb_ratio": 2.0,
-                                                                          "stribeck_velocity_mm_s": 1.0}))
-
-
-def test_with_exact_jacobians_asked_for_a_rippled_model_still_takes_differences(monkeypatch):
-    from dataclasses import replace
-
-    import ident.diagnosis.candidates as cand
-    import ident.diagnosis.spec as spec_module
-    from ident.diagnosis.config import DEFAULT
-
-    chunk = _chunk()[0]
-    spec = ModelSpec(THETA.copy()).with_effect("saturation", {"limit": 3000.0}, 0)
-    spec.modes[4] = 1  # the sampled controller: the clip switches at samples
-    monkeypatch.setattr(spec_module, "sensitivities", lambda *a, **k: pytest.fail("an exact Jacobian was taken"))
-    cand.fit_spec(spec, chunk, max_iter=2, cfg=replace(DEFAULT, exact_fine=True, exact_rough=True))
+    effect, params, variant = MODELS["saturation, psi 0.5"]
+    true = ModelSpec(PID.copy()).with_effect(effect, params, variant)  # the bench's PID drive
+    true.modes[4] = 1
+    x_r = point_to_point(3)
+    starts = segment_starts(x_r.size, None)
+    x = simulate_spec(true, make_chunk(x_r, x_r, TS, starts))
+    chunk = make_chunk(x_r, x + np.random.default_rng(0).normal(0.0, 5e-5, x.size), TS, starts)
+    off = true.copy()
+    off.theta = off.theta * 1.02
+    rough, slope = ripple(off, chunk, "a1")
+    assert rough < 0.01
+    assert slope == pytest.approx(1.0, abs=0.1)
 
 
 def test_the_intervals_exact_jacobian_is_the_central_differences_on_a_smooth_model():
@@ -158,8 +152,8 @@ def test_the_intervals_exact_jacobian_is_the_central_differences_on_a_smooth_mod
     loop: the same columns, base and effect, to the differences' truncation (both on the
     estimate's sub-steps: here +1 % of a1 would make the model choose 3 instead of 2)."""
     from ident.diagnosis.config import DEFAULT
-    from ident.diagnosis.intervals import _Columns, _difference_jacobian, _jacobian
-    from ident.diagnosis.spec import make_chunk
+    from ident.diagnosis.intervals import _Columns, _jacobian
+    from ident.diagnosis.spec import make_chunk, simulate_spec
 
     chunk0 = _chunk()[0]
     spec = ModelSpec(THETA.copy()).with_effect("time_delay", {"delay_s": 0.0023}, 1)
@@ -167,8 +161,15 @@ def test_the_intervals_exact_jacobian_is_the_central_differences_on_a_smooth_mod
     chunk = make_chunk(chunk0.x_r, x + np.random.default_rng(2).normal(0.0, 1e-5, x.size), chunk0.Ts, chunk0.starts)
     c = _Columns(spec, {"time_delay": {}}, DEFAULT)
     J, r = _jacobian(spec, chunk, c, None)
-    Jd, rd = _difference_jacobian(spec, chunk, c, None)
-    np.testing.assert_array_equal(r, rd)
+    m, nsub, v0 = chunk.score, sim_substeps(spec, chunk.Ts), c.values(spec)
+
+    def wsim(k: int, sign: float) -> np.ndarray:  # the weighted run, column k moved by ±1 % of its scale
+        v = v0.copy()
+        v[k] += sign * 0.01 * c.scale[k]
+        return chunk.w[m] * simulate_spec(c.moved(spec, v), chunk, nsub)[m]
+
+    Jd = np.column_stack([(wsim(k, 1.0) - wsim(k, -1.0)) / 0.02 for k in range(len(c.cols))])
+    np.testing.assert_array_equal(r, chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m]))
     assert J.shape == Jd.shape == (r.size, 9)  # θ and the dead time
     for k in range(J.shape[1]):
         assert np.linalg.norm(J[:, k] - Jd[:, k]) <= 0.02 * np.linalg.norm(Jd[:, k]), k

@@ -43,7 +43,9 @@ cyclic_error    ``c_s·sin(2πx/P) + c_c·cos(2πx/P)``, period_mm P [7], c_s [8
 saturation      ``u`` clipped to ``±limit − c·ẋ`` mm/s², limit [10], c = limit_slope [13]
                 (1/s): the drive clips its own output, ``u + c·ẋ``, which carries the
                 plant's viscous share of the speed term eq. 3.3 folds into a1.  Mode 0:
-                integral frozen while it would wind up (conditional integration); with
+                integral frozen while it would wind up (conditional integration: over a
+                step it takes the share of its increment that puts the output on the
+                limit, so the run is continuous in the parameters); with
                 ψ [12] > 0 the position term's motor share is the integral of the motor
                 velocity and freezes with it (P-PI: the velocity integral stops).  Mode 1:
                 no anti-windup — the integral runs on while the output is clipped, as in

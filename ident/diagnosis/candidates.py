@@ -55,25 +55,7 @@ if TYPE_CHECKING:
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "sse", "fit_spec", "search",
            "sampled_base", "refit_base", "base_variants", "softened_base", "effect_parameters", "cascade_motor_share",
            "chunk_regression", "delayed_regression_start", "centre_delay", "scan_motor_fraction", "race_part",
-           "held_force", "shoot", "polish", "segment_variance_fit", "profile_gap", "rippled"]
-
-
-def rippled(spec: ModelSpec) -> bool:
-    """Whether ``spec``'s free-run cost ripples in its parameters on a scale finer than any
-    useful step: a saturation off the kernel's exact step — on the sampled controller, a
-    two-mass model or behind a dead time in the loop, where clip and integrator freeze
-    switch at sub-step or sample instants.  There the exact slope is the slope of one
-    ripple — up to 30 times the trend (benchmarks/bench_cost_ripple.py) — and a fit reads
-    the trend by differences instead.  On the other models the exact slope is the trend's:
-    Coulomb stick, a two-mass backlash's contact (:func:`ident.kernel._contact_push`) and
-    the saturation on the exact step (single mass, continuous controller;
-    :func:`ident.kernel._saturated_step`) have their switch instants resolved inside the
-    sub-step, so the free run is continuous in the parameters.
-    """
-    modes = spec.modes
-    two_mass = any(e in spec.effects and modes[MODE_SLOTS[e]] >= 1 for e in ("backlash", "resonance"))
-    delay_in_loop = "time_delay" in spec.effects and modes[MODE_SLOTS["time_delay"]] == 1
-    return "saturation" in spec.effects and (modes[MODE_SLOTS["controller"]] != 0 or two_mass or delay_in_loop)
+           "held_force", "shoot", "polish", "segment_variance_fit", "profile_gap"]
 
 
 def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effects: bool = True,
@@ -90,9 +72,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     step coarser than ``cfg.fd_step`` is followed by a polish at the fine step (half the
     iterations) when ``polish``.  With ``cfg.exact_fine`` (``cfg.exact_rough``) the fine
     (coarse) step is not a difference: it stands for the exact Jacobian, the complex-step
-    sensitivities of the simulation (:func:`~ident.diagnosis.spec.residual_jacobian`) —
-    but on a model whose cost ripples (:func:`rippled`), where every column is a
-    difference.  With ``cfg.fit_log`` an effect parameter whose box lies above zero is
+    sensitivities of the simulation (:func:`~ident.diagnosis.spec.residual_jacobian`).
+    With ``cfg.fit_log`` an effect parameter whose box lies above zero is
     fitted by its logarithm.  ``secant_nfev`` > 0:
     the secant Levenberg–Marquardt (:func:`ident.least_squares.secant_lm`) with that many
     simulations instead, no polish.  ``search``: a fit of an effect's search (the race and its
@@ -223,10 +204,8 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         moved.theta, moved.ep = th, ep
         return residual_jacobian(moved, chunk, d_th, d_ep, restarts=restarts, nsub=nsub)
 
-    rough = rippled(spec)
-
     def how(h: float) -> dict:  # the Jacobian of a fit at difference step h
-        exact = (cfg.exact_fine if h <= cfg.fd_step else cfg.exact_rough) and not rough
+        exact = cfg.exact_fine if h <= cfg.fd_step else cfg.exact_rough
         # the columns simulated together (one lockstep run), and split over two threads
         # (ident.least_squares._jacobian; the kernel runs outside the GIL) only outside a
         # search: the searches run side by side in the diagnosis's two workers, and a split
@@ -400,8 +379,7 @@ def segment_variance_fit(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig) ->
     polished there with exact Jacobians (:func:`~ident.diagnosis.spec.residual_jacobian`):
     the differences' steps stop where the difference quotient stops telling the slope, the
     exact slope goes on to the stationary point of the cost the estimate and its intervals
-    (:mod:`ident.diagnosis.intervals`) stand for.  On a model whose cost ripples
-    (:func:`rippled`) the polish takes fine differences, as every fit there does.
+    (:mod:`ident.diagnosis.intervals`) stand for.
     """
     fitted_on = chunk  # the weights of the last fit
     for step in range(cfg.segment_variance_steps):

@@ -233,17 +233,17 @@ class DiagnosisConfig:
     fd_step_rough: float = 1e-2
     #: Exact Jacobians (complex-step sensitivities of the simulation,
     #: :func:`ident.diagnosis.spec.residual_jacobian`) in place of the fine differences
-    #: (``exact_fine``) and of the coarse ones (``exact_rough``), on every model whose cost
-    #: does not ripple (:func:`ident.diagnosis.candidates.rippled`: only a saturation off
-    #: the kernel's exact step still ripples).  The intervals' Jacobian is exact on those
-    #: models either way.  Off: on the tuning sets, one run each, differences → exact fine
-    #: and coarse with ``fit_log``: drive-zoo-dev + drive-zoo-dev2 47/49 → 44/49 (a second
-    #: effect beside a two-mass gap, a dead time preferred to a mode by 0.2 % of held-out
-    #: residual, a saturation variant that fails on the validation recording), independent
-    #: tuning seeds 65/70 → 64/70 — but read back from CSV 62/70 → 64/70, 5 → 2 verdicts
-    #: changed by the CSV's rounding — no false alarm either way, a ζ 0.4 pole pair on the
-    #: recorded position named a two-mass resonance (tests/test_diagnosis_verdicts.py), and
-    #: the diagnosis about 1.2× as long (a complex-step column costs 2-3 real runs).
+    #: (``exact_fine``) and of the coarse ones (``exact_rough``), on every model (the
+    #: saturation's freeze off the exact step is continuous, ident.kernel._integral_share).
+    #: The intervals' Jacobian is exact either way.  Off: on the tuning sets, one run each,
+    #: differences → exact fine and coarse with ``fit_log``: drive-zoo-dev + drive-zoo-dev2
+    #: 47/49 → 44/49 (resonance 5/7: a mode lost to a gap or a dead time by a hair's
+    #: breadth of held-out residual, a mode added beside a gap or a dead time), also with
+    #: the race's Jacobian carried over every other step by Broyden's update (20/21 +
+    #: 24/28); the diagnosis 1.39× as long (bench_diagnosis_speed.py --compare: a
+    #: complex-step column costs 2.2–2.6 real runs); from a full-closed gap started 30 %
+    #: long the re-estimation stops at a kink of the hunting's cost at 7× the cost the
+    #: differences reach (tests/test_diagnosis_units.py's stationary-point fixture).
     exact_fine: bool = False
     exact_rough: bool = False
     #: Fit an effect's parameters whose box lies above zero (a frequency, a damping, a gap,

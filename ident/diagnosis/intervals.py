@@ -4,10 +4,9 @@ The accepted model (base θ of eq. 3.3 and the effects' parameters, fitted joint
 error, eq. 3.6) minimises ``½‖w·(x̂(p) − x)‖²`` over the scored samples.  Linearised at
 the estimate, ``r(p) ≈ r(p̂) + J (p − p̂)`` with ``J = ∂(w·x̂)/∂p`` (the exact complex-step
 sensitivities of the free-run simulation, :func:`~ident.diagnosis.augmented.sensitivities`:
-the slope of the branch of every switch the estimate's run takes — on a model whose cost
-ripples, :func:`~ident.diagnosis.candidates.rippled`, central differences at the coarse step
-that read the trend instead; every column one parameter of the joint fit, base included, so
-an effect's interval carries its correlation with the base).  The residual of a free run is
+the slope of the branch of every switch the estimate's run takes; every column one parameter
+of the joint fit, base included, so an effect's interval carries its correlation with the
+base).  The residual of a free run is
 coloured — noise and unmodelled dynamics pass through the loop — so the covariance is the
 one that holds for correlated residuals, the linearised delete-one-block jackknife of
 :mod:`ident.uncertainty` (``_sandwich``: blocks of five integrated autocorrelation times of
@@ -36,7 +35,6 @@ import numpy as np
 from scipy.special import stdtrit
 
 from ident.diagnosis.augmented import EP_INDEX, N_EP, sensitivities
-from ident.diagnosis.candidates import rippled
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.effects import EFFECT_MODELS
 from ident.diagnosis.spec import Chunk, ModelSpec, sim_substeps, simulate_spec
@@ -85,7 +83,7 @@ def _parameters(spec: ModelSpec, names: list[str], z: np.ndarray, effect: str, T
 class _Columns:
     """The joint fit's parameters as Jacobian columns: θ of eq. 3.3 and every effect's free
     ones not held by a bound (a dead time the profile centred included: its interval is the
-    curvature's there), with their scales and the coarse difference steps of a rippled cost."""
+    curvature's there), with their scales."""
 
     def __init__(self, spec: ModelSpec, held: dict[str, dict[str, str]], cfg: DiagnosisConfig):
         self.cols: list[tuple[str | None, int, str]] = [(None, j, "") for j in range(8)]
@@ -99,7 +97,6 @@ class _Columns:
         floors = np.array([base_floors[j] if e is None else EFFECT_MODELS[e].scale_floor.get(n, 1e-6)
                            for e, j, n in self.cols])
         self.scale = np.maximum(np.abs(v0), floors)
-        self.steps = cfg.fd_step_rough * self.scale
 
     def values(self, spec: ModelSpec) -> np.ndarray:
         return np.array([spec.theta[j] if e is None else spec.ep[j] for e, j, _ in self.cols], dtype=float)
@@ -115,15 +112,12 @@ class _Columns:
 
 
 def _jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns, pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
-    """J = ∂(w·x̂)/∂(v/scale) on the scored samples (exact sensitivities; central differences on
-    a rippled cost) and r = w·(x̂ − x).
+    """J = ∂(w·x̂)/∂(v/scale) on the scored samples (exact sensitivities) and r = w·(x̂ − x).
 
     The columns in two groups, jobs of ``pool`` when given (the kernel releases the GIL).
     """
     m = chunk.score
     w = chunk.w[m]
-    if rippled(spec):
-        return _difference_jacobian(spec, chunk, c, pool)
     nsub = sim_substeps(spec, chunk.Ts)
 
     def columns(ks: range) -> np.ndarray:
@@ -141,30 +135,6 @@ def _jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns, pool: Executor | None)
         parts = list(pool.map(columns, groups)) if pool is not None else [columns(g) for g in groups]
         r = w * (simulate_spec(spec, chunk)[m] - chunk.x[m])
         J = w[:, None] * np.concatenate(parts, axis=0).T
-    return J, r
-
-
-def _difference_jacobian(spec: ModelSpec, chunk: Chunk, c: _Columns,
-                         pool: Executor | None) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_jacobian` by central differences at the coarse steps (a rippled cost's trend),
-    on the estimate's sub-steps (a step of a1 can change the sub-steps the model would choose:
-    a difference across them reads the change of discretisation, not the slope)."""
-    m = chunk.score
-    w = chunk.w[m]
-    v0 = c.values(spec)
-    nsub = sim_substeps(spec, chunk.Ts)
-
-    def wsim(k: int, sign: float) -> np.ndarray:
-        v = v0.copy()
-        v[k] += sign * c.steps[k]
-        return w * simulate_spec(c.moved(spec, v), chunk, nsub)[m]
-
-    jobs = [(k, sg) for k in range(len(c.cols)) for sg in (1.0, -1.0)]
-    with np.errstate(all="ignore"):
-        sims = list(pool.map(lambda a: wsim(*a), jobs)) if pool is not None else [wsim(*a) for a in jobs]
-        r = w * (simulate_spec(spec, chunk)[m] - chunk.x[m])
-        J = np.column_stack([(sims[2 * k] - sims[2 * k + 1]) / 2.0 for k in range(len(c.cols))])
-        J *= (c.scale / c.steps)[None, :]  # per unit of each column's scale, as _jacobian
     return J, r
 
 

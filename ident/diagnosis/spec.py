@@ -308,10 +308,11 @@ def _at_rest(x: np.ndarray) -> bool:
     """Does the recorded position ``x`` (a stretch of samples) show no motion: the slope of
     the straight line fitted to it within three standard errors of 0?"""
     t = np.arange(x.size) - 0.5 * (x.size - 1)
-    stt = float(t @ t)
-    slope = float(t @ (x - x.mean())) / stt
+    # np.sum's pairwise order, not BLAS's machine-dependent dot
+    stt = float(np.sum(t * t))
+    slope = float(np.sum(t * (x - x.mean()))) / stt
     res = x - x.mean() - slope * t
-    se = math.sqrt(float(res @ res) / max(x.size - 2, 1) / stt)
+    se = math.sqrt(float(np.sum(res * res)) / max(x.size - 2, 1) / stt)
     return abs(slope) <= 3.0 * se
 
 
@@ -346,18 +347,33 @@ def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float,
     either side of [lo, hi].  ``moving``: the samples that count as moving (default
     ``v_r`` ≠ 0).
     """
-    t = np.arange(-_HALF, _HALF + 1) * Ts
-    V = np.vander(t, 3)  # columns t², t, 1
-    P = np.linalg.pinv(V)  # (3, 2·_HALF + 1): parabola coefficients from the samples
-    idx = np.arange(lo, hi + 1)[:, None] + np.arange(-_HALF, _HALF + 1)[None, :]
-    X = x[idx]
-    C = X @ P.T
-    misfit = np.sum((X - C @ V.T) ** 2, axis=1)
+    # x ≈ c0·j² + c1·j + c2 over j = −_HALF … _HALF: on the symmetric stencil the normal
+    # equations split (odd moments vanish) and the least-squares weights have a closed form,
+    # summed column by column in a fixed order — no BLAS or LAPACK, whose order of
+    # operations (and so the restart's last bits) depends on the machine
+    js = range(-_HALF, _HALF + 1)
+    s0 = float(2 * _HALF + 1)
+    s2 = float(sum(j * j for j in js))
+    s4 = float(sum(j ** 4 for j in js))
+    det = s4 * s0 - s2 * s2
+    seg = np.arange(lo, hi + 1)
+    c0 = np.zeros(seg.size)
+    c1 = np.zeros(seg.size)
+    c2 = np.zeros(seg.size)
+    for j in js:
+        xj = x[seg + j]
+        c0 += xj * ((s0 * j * j - s2) / det)
+        c1 += xj * (j / s2)
+        c2 += xj * ((s4 - s2 * j * j) / det)
+    misfit = np.zeros(seg.size)
+    for j in js:
+        e = x[seg + j] - (c0 * float(j * j) + c1 * float(j) + c2)
+        misfit += e * e
     moving = v_r[lo : hi + 1] != 0.0 if moving is None else moving[lo : hi + 1]
     if moving.any():
         misfit[~moving] = np.inf
     k = int(np.argmin(misfit))
-    return lo + k, float(C[k, 1]), float(2.0 * C[k, 0])
+    return lo + k, float(c1[k]) / Ts, float(2.0 * c0[k]) / (Ts * Ts)
 
 
 def make_chunk(x_r: np.ndarray, x: np.ndarray, Ts: float, starts: np.ndarray, skip_s: float = 0.02) -> Chunk:
