@@ -1076,14 +1076,16 @@ def _kernel_many(xr, vr, ar, x0, starts, warm, vw, aw, Ts, nsub, TH, flags, EP, 
                     xm[p] += h * vn
                     xt[p] += h * vtn
                     # the integral by the midpoint of the feedback's move
-                    ei[p] += wind * h * (xrj + 0.5 * h * sr - xfb - 0.5 * h * (vn if fb_motor else vtn))
+                    if wind.real != 0.0:  # (the sampled controller's integral moves at samples only)
+                        ei[p] += wind * h * (xrj + 0.5 * h * sr - xfb - 0.5 * h * (vn if fb_motor else vtn))
                     xw[p] += wind_x[p] * h * vn
                     continue
                 vn = _friction_step(v[p], u, h, 1.0, d0[p], d1[p], rs[p], on_st, vs[p])
                 acc = div(vn - v[p], h)
                 v[p] = vn
                 xm[p] += h * vn
-                ei[p] += wind * h * (xrj - xfb)
+                if wind.real != 0.0:
+                    ei[p] += wind * h * (xrj - xfb)
                 xw[p] += wind_x[p] * h * vn
                 if on_bl:
                     if (xm[p] - xt[p]).real > half[p].real:

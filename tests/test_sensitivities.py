@@ -151,7 +151,6 @@ def test_the_intervals_exact_jacobian_is_the_central_differences_on_a_smooth_mod
     """intervals._jacobian (exact) against its central differences at 1 % on a dead time in the
     loop: the same columns, base and effect, to the differences' truncation (both on the
     estimate's sub-steps: here +1 % of a1 would make the model choose 3 instead of 2)."""
-    from ident.diagnosis.config import DEFAULT
     from ident.diagnosis.intervals import _Columns, _jacobian
     from ident.diagnosis.spec import make_chunk, simulate_spec
 
@@ -159,16 +158,13 @@ def test_the_intervals_exact_jacobian_is_the_central_differences_on_a_smooth_mod
     spec = ModelSpec(THETA.copy()).with_effect("time_delay", {"delay_s": 0.0023}, 1)
     x = simulate_augmented(chunk0.x_r, chunk0.x, chunk0.Ts, spec.theta, ep=spec.ep, **_kw(spec, chunk0))
     chunk = make_chunk(chunk0.x_r, x + np.random.default_rng(2).normal(0.0, 1e-5, x.size), chunk0.Ts, chunk0.starts)
-    c = _Columns(spec, {"time_delay": {}}, DEFAULT)
+    c = _Columns(spec, {"time_delay": {}})
     J, r = _jacobian(spec, chunk, c, None)
-    m, nsub, v0 = chunk.score, sim_substeps(spec, chunk.Ts), c.values(spec)
-
-    def wsim(k: int, sign: float) -> np.ndarray:  # the weighted run, column k moved by ±1 % of its scale
-        v = v0.copy()
-        v[k] += sign * 0.01 * c.scale[k]
-        return chunk.w[m] * simulate_spec(c.moved(spec, v), chunk, nsub)[m]
-
-    Jd = np.column_stack([(wsim(k, 1.0) - wsim(k, -1.0)) / 0.02 for k in range(len(c.cols))])
+    d_th, d_ep = np.zeros((len(c.cols), 8)), np.zeros((len(c.cols), N_EP))
+    for k, (e, j, _) in enumerate(c.cols):  # column k: its parameter moved by its scale
+        (d_th if e is None else d_ep)[k, j] = c.scale[k]
+    m = chunk.score
+    Jd = (chunk.w[m] * _central(spec, chunk, d_th, d_ep, 0.01)[:, m]).T  # ±1 % of each scale
     np.testing.assert_array_equal(r, chunk.w[m] * (simulate_spec(spec, chunk)[m] - chunk.x[m]))
     assert J.shape == Jd.shape == (r.size, 9)  # θ and the dead time
     for k in range(J.shape[1]):

@@ -85,7 +85,7 @@ class _Columns:
     ones not held by a bound (a dead time the profile centred included: its interval is the
     curvature's there), with their scales."""
 
-    def __init__(self, spec: ModelSpec, held: dict[str, dict[str, str]], cfg: DiagnosisConfig):
+    def __init__(self, spec: ModelSpec, held: dict[str, dict[str, str]]):
         self.cols: list[tuple[str | None, int, str]] = [(None, j, "") for j in range(8)]
         for e in spec.effects:
             for name in EFFECT_MODELS[e].free(spec):
@@ -152,7 +152,7 @@ def stationary_point(spec: ModelSpec, chunk: Chunk, cfg: DiagnosisConfig, pool: 
     parameters held by a bound (effect → name → why).
     """
     held = {e: at_bound(spec, e, chunk, cfg) for e in spec.effects}
-    c = _Columns(spec, held, cfg)
+    c = _Columns(spec, held)
     boxes = [(-np.inf, np.inf) if e is None else _box(spec, e, n, chunk, cfg) for e, _, n in c.cols]
     lo, hi = np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes])
     m = chunk.score

@@ -357,17 +357,17 @@ def _restart_state(x: np.ndarray, v_r: np.ndarray, lo: int, hi: int, Ts: float,
     s4 = float(sum(j ** 4 for j in js))
     det = s4 * s0 - s2 * s2
     seg = np.arange(lo, hi + 1)
+    X = {j: x[seg + j] for j in js}  # the stencil's samples, per offset
     c0 = np.zeros(seg.size)
     c1 = np.zeros(seg.size)
     c2 = np.zeros(seg.size)
     for j in js:
-        xj = x[seg + j]
-        c0 += xj * ((s0 * j * j - s2) / det)
-        c1 += xj * (j / s2)
-        c2 += xj * ((s4 - s2 * j * j) / det)
+        c0 += X[j] * ((s0 * j * j - s2) / det)
+        c1 += X[j] * (j / s2)
+        c2 += X[j] * ((s4 - s2 * j * j) / det)
     misfit = np.zeros(seg.size)
     for j in js:
-        e = x[seg + j] - (c0 * float(j * j) + c1 * float(j) + c2)
+        e = X[j] - (c0 * float(j * j) + c1 * float(j) + c2)
         misfit += e * e
     moving = v_r[lo : hi + 1] != 0.0 if moving is None else moving[lo : hi + 1]
     if moving.any():
