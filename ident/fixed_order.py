@@ -1,15 +1,19 @@
-"""Linear algebra of the Gauss–Newton steps in a fixed order of operations.
+"""Linear algebra of the fits in a fixed order of operations.
 
-The output-error fits (:func:`ident.least_squares.bounded_lm`) follow costs that ripple on
-a fine scale (friction sticking, a gap closing): a difference in the last bit of one step
-can send a search into another valley.  BLAS and LAPACK do not fix their order of
-operations — it depends on the CPU's kernel (with or without FMA, the width of its
-vectors) and on the number of threads — so ``J.T @ J`` or ``np.linalg.solve`` made the
-same recording give other parameters, even another verdict, on another machine (measured:
-the concealed Stribeck fixture named with OpenBLAS's Haswell kernels and not with its
-Sandybridge ones).  These compiled loops do the same few products in one written order
-(IEEE arithmetic, no fast-math, no contraction), so the results are the same bit for bit
-on any x86-64 machine, under any load and thread count.
+The output-error fits (:func:`ident.least_squares.bounded_lm`, :mod:`ident.refine`) follow
+costs that ripple on a fine scale (friction sticking, a gap closing): a difference in the
+last bit of one step can send a search into another valley.  BLAS and LAPACK do not fix
+their order of operations — it depends on the CPU's kernel (with or without FMA, the width
+of its vectors) and on the number of threads — so ``J.T @ J``, ``np.linalg.solve`` or
+``np.linalg.lstsq`` made the same recording give other parameters, even another verdict,
+on another machine (measured: drive-zoo-dev's case_018 named a resonance with OpenBLAS's
+SkylakeX kernels and backlash with its Haswell ones, from an equation-error model that
+differed in its 16th digit).  These compiled loops do the same products in one written
+order (IEEE arithmetic, no fast-math, no contraction), so the results are the same bit for
+bit on any x86-64 machine, under any load and thread count: dot products and sums of
+squares, the Gauss–Newton normal equations, small square solves, Householder QR and the
+least squares it gives (the regression of eq. 3.11 and the diagnosis's fits), and
+matrix–vector products.
 """
 
 from __future__ import annotations
@@ -17,7 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["dot", "normal_products", "sum_squares", "solve", "weighted_rows"]
+__all__ = ["dot", "lstsq", "matvec", "norm", "normal_products", "qr_r", "solve", "solve_upper", "sum_squares",
+           "weighted_rows"]
 
 #: Independent partial sums per dot product (combined in a fixed order): four keep the
 #: adder's pipeline busy without making the order depend on the machine.
@@ -139,3 +144,107 @@ def solve(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     if not ok:
         raise np.linalg.LinAlgError("singular matrix")
     return x
+
+
+@njit(cache=True, nogil=True)
+def _householder(A: np.ndarray, n: int) -> None:
+    """Householder triangularisation of the first ``n`` columns of ``A`` (Fortran order),
+    applied to every column: afterwards ``A[:n, :n]`` is R and each further column is Qᵀ
+    times the column it was.  Reflections with a positive diagonal, in a written order."""
+    m, ncol = A.shape
+    for k in range(min(n, m)):
+        v = A[k:, k]
+        nx = np.sqrt(_dot(v, v))
+        if nx == 0.0:
+            continue
+        alpha = -nx if v[0] >= 0.0 else nx
+        v[0] -= alpha
+        vv = _dot(v, v)
+        for j in range(k + 1, ncol):
+            c = A[k:, j]
+            s = 2.0 * _dot(v, c) / vv
+            for i in range(c.size):
+                c[i] -= s * v[i]
+        A[k, k] = alpha
+        for i in range(k + 1, m):
+            A[i, k] = 0.0
+        if alpha < 0.0:  # R with a positive diagonal: flip row k of R and of Qᵀ·(further columns)
+            for j in range(k, ncol):
+                A[k, j] = -A[k, j]
+
+
+def qr_r(Z: np.ndarray) -> np.ndarray:
+    """R of ``Z = QR`` (Householder, square n×n for Z m×n with m ≥ n, positive diagonal where
+    the column is not zero), in a fixed order: the same bits on any machine."""
+    A = np.array(Z, dtype=np.float64, order="F")
+    n = A.shape[1]
+    _householder(A, n)
+    return np.triu(A[: min(n, A.shape[0]), :])
+
+
+@njit(cache=True, nogil=True)
+def _back_substitute(R: np.ndarray, b: np.ndarray, tol: float) -> np.ndarray:
+    n = b.size
+    x = np.zeros(n)
+    for i in range(n - 1, -1, -1):
+        if abs(R[i, i]) <= tol:  # a column the others already span: left out (its weight 0)
+            continue
+        s = b[i]
+        for j in range(i + 1, n):
+            s -= R[i, j] * x[j]
+        x[i] = s / R[i, i]
+    return x
+
+
+def lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Least-squares solution of ``A x ≈ y`` (A m×n, m ≥ n) by Householder QR, in a fixed order.
+
+    Replaces ``np.linalg.lstsq(A, y, rcond=None)`` where its last bits must not depend on the
+    machine.  On a full-rank A the two agree to rounding.  A column within ``max(m, n)·eps`` of
+    the span of those before it (relative to R's largest diagonal) gets weight 0 — the
+    *basic* solution, where LAPACK's SVD would return the minimum-norm one."""
+    A = np.asarray(A, dtype=np.float64)
+    m, n = A.shape
+    if m < n:
+        raise ValueError(f"lstsq needs at least as many rows as columns, got {A.shape}")
+    Z = np.empty((m, n + 1), order="F")
+    Z[:, :n] = A
+    Z[:, n] = y
+    _householder(Z, n)
+    R = Z[:n, :n]
+    d = np.abs(np.diag(R))
+    tol = max(m, n) * np.finfo(float).eps * (float(d.max()) if d.size else 0.0)
+    return _back_substitute(np.ascontiguousarray(R), np.ascontiguousarray(Z[:n, n]), tol)
+
+
+@njit(cache=True, nogil=True)
+def _matvec(A: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    for i in range(A.shape[0]):
+        s = 0.0
+        for j in range(A.shape[1]):
+            s += A[i, j] * x[j]
+        out[i] = s
+
+
+def matvec(A: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A x`` (A m×n, x n), each row summed left to right: the same bits on any machine."""
+    A = np.asarray(A, dtype=np.float64)
+    out = np.empty(A.shape[0])
+    _matvec(A, np.ascontiguousarray(x, dtype=np.float64), out)
+    return out
+
+
+def solve_upper(R: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``R⁻¹ B`` for an upper-triangular, non-singular R (B a vector or a matrix of
+    columns) by back-substitution in a fixed order (``scipy.linalg.solve_triangular``'s
+    result without its machine-dependent BLAS)."""
+    R = np.ascontiguousarray(R, dtype=np.float64)
+    B = np.asarray(B, dtype=np.float64)
+    if B.ndim == 1:
+        return _back_substitute(R, np.ascontiguousarray(B), 0.0)
+    return np.column_stack([_back_substitute(R, np.ascontiguousarray(B[:, j]), 0.0) for j in range(B.shape[1])])
+
+
+def norm(v: np.ndarray) -> float:
+    """‖v‖₂ of a vector in a fixed order (``np.linalg.norm`` of a vector is a BLAS dot)."""
+    return float(np.sqrt(sum_squares(v)))

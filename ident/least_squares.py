@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ident.fixed_order import normal_products, solve, sum_squares
+from ident.fixed_order import matvec, normal_products, solve, sum_squares
 
 __all__ = ["LMResult", "bounded_lm", "secant_lm"]
 
@@ -237,9 +237,9 @@ def secant_lm(resid, z0, lb, ub, *, max_nfev: int = 100, step=1e-3, ftol: float 
         nfev += 1
         cost_new = 0.5 * sum_squares(r_new)
         delta = z_new - z
-        dd = float(delta @ delta)
+        dd = sum_squares(delta)
         if np.all(np.isfinite(r_new)) and dd > 0.0:
-            J += np.outer(r_new - r - J @ delta, delta / dd)
+            J += np.outer(r_new - r - matvec(J, delta), delta / dd)
         if np.isfinite(cost_new) and cost_new < cost:
             rel = (cost - cost_new) / cost if cost > 0 else 0.0
             z, r, cost = z_new, r_new, cost_new

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.errors import InputError
-from ident.fixed_order import sum_squares
+from ident.fixed_order import lstsq, matvec, sum_squares
 from ident.least_squares import bounded_lm
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel, alphas_from_search, base_vector
@@ -117,7 +117,7 @@ def _start_point(model, bounds: Bounds, Ts: float, regression=None) -> np.ndarra
     if moved and regression is not None:
         theta1 = np.array([float(v) for v in alphas_from_search(wn_c, zeta_c, p_c)])
         Phi2 = regression.Phi[:, 3:]
-        rest, *_ = np.linalg.lstsq(Phi2, regression.Y - regression.Phi[:, :3] @ theta1, rcond=None)
+        rest = lstsq(Phi2, regression.Y - matvec(regression.Phi[:, :3], theta1))
     else:
         a2 = float(model.a2)
         rest = np.array([model.b2, model.b1, model.b0, model.d0, model.d1], dtype=float) / a2

@@ -32,6 +32,7 @@ import numpy as np
 
 from core.errors import IdentificationError, InputError
 from ident import preprocessing as pp
+from ident.fixed_order import lstsq, matvec, sum_squares
 
 __all__ = ["Regression", "build_regression", "lstsq_scaled", "COLUMNS"]
 
@@ -90,10 +91,8 @@ def lstsq_scaled(Phi: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, float]:
     """Unconstrained LS of eq. 3.12 with unit-norm column scaling; returns (θ, ½‖Y − Φθ‖²)."""
     scale = np.linalg.norm(Phi, axis=0)
     scale[scale == 0] = 1.0
-    sol, *_ = np.linalg.lstsq(Phi / scale, Y, rcond=None)
-    theta = sol / scale
-    r = Y - Phi @ theta
-    return theta, 0.5 * float(r @ r)
+    theta = lstsq(Phi / scale, Y) / scale
+    return theta, 0.5 * sum_squares(Y - matvec(Phi, theta))
 
 
 def _shift_cost(Phi: np.ndarray, Y: np.ndarray, mask: np.ndarray) -> float:
@@ -110,7 +109,7 @@ def _shift_cost(Phi: np.ndarray, Y: np.ndarray, mask: np.ndarray) -> float:
     d = np.sqrt(np.diag(A))
     d[d == 0] = 1.0
     As = A / np.outer(d, d)
-    theta = np.linalg.lstsq(As, b / d, rcond=1e-14)[0] / d
+    theta = lstsq(As, b / d) / d
     r = y - np.einsum("ki,i->k", P, theta)
     return 0.5 * float(np.einsum("k,k->", r, r))
 

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from ident.fixed_order import dot, normal_products, solve, sum_squares, weighted_rows
+from ident.fixed_order import (dot, lstsq, matvec, norm, normal_products, qr_r, solve, solve_upper, sum_squares,
+                               weighted_rows)
 
 
 @pytest.fixture
@@ -59,3 +60,54 @@ def test_solve_returns_the_solution_of_a_well_conditioned_system(rows):
     A = Y[:, :5] @ Y[:, :5].T + 5.0 * np.eye(5)
     b = x[:5]
     assert np.allclose(A @ solve(A, b), b, rtol=1e-12, atol=1e-12)
+
+
+@pytest.fixture
+def regression():
+    """A tall regression whose columns span eight decades, as eq. 3.11's do."""
+    rng = np.random.default_rng(11)
+    A = rng.standard_normal((3000, 6)) * np.array([1e-2, 1.0, 1e2, 1e3, 1e5, 1e6])
+    return A, A @ rng.standard_normal(6) + 1e-3 * rng.standard_normal(3000)
+
+
+def test_lstsq_is_the_least_squares_solution_of_a_full_rank_system(regression):
+    A, y = regression
+    x = lstsq(A, y)
+    assert np.allclose(x, np.linalg.lstsq(A, y, rcond=None)[0], rtol=1e-6, atol=0)
+    assert np.abs(A.T @ (y - A @ x)).max() < 1e-9 * np.abs(A.T @ y).max()  # normal equations hold
+
+
+def test_lstsq_gives_a_column_the_others_span_no_weight(regression):
+    A, y = regression
+    B = np.column_stack([A[:, :3], 2.0 * A[:, 1], A[:, 3:]])
+    x = lstsq(B / np.linalg.norm(B, axis=0), y)
+    assert x[3] == 0.0 and np.all(np.isfinite(x))
+
+
+def test_lstsq_refuses_fewer_rows_than_columns():
+    with pytest.raises(ValueError, match="rows"):
+        lstsq(np.ones((2, 3)), np.ones(2))
+
+
+def test_qr_r_is_the_triangular_factor_with_a_positive_diagonal(regression):
+    A, _y = regression
+    R = qr_r(A)
+    assert R.shape == (6, 6) and np.all(np.diag(R) > 0) and np.array_equal(R, np.triu(R))
+    assert np.allclose(R.T @ R, A.T @ A, rtol=1e-10, atol=1e-6)
+
+
+def test_solve_upper_inverts_a_triangular_matrix_for_vectors_and_columns(regression):
+    A, y = regression
+    R = qr_r(A)
+    b = R @ np.arange(1.0, 7.0)
+    assert np.allclose(solve_upper(R, b), np.arange(1.0, 7.0), rtol=1e-10)
+    B = np.column_stack([b, 2 * b])
+    assert np.allclose(solve_upper(R, B), np.column_stack([np.arange(1.0, 7.0), 2 * np.arange(1.0, 7.0)]), rtol=1e-10)
+
+
+def test_matvec_and_norm_sum_each_row_left_to_right(regression):
+    A, y = regression
+    x = np.arange(1.0, 7.0)
+    expected = np.array([sum(float(a) * float(b) for a, b in zip(row, x)) for row in A[:50]])
+    assert np.array_equal(matvec(A[:50], x), expected)  # the written order, bit for bit
+    assert norm(y) == pytest.approx(float(np.linalg.norm(y)), rel=1e-14)

@@ -48,6 +48,7 @@ from ident.diagnosis.spec import (Chunk, ModelSpec, estimated_states, make_chunk
                                   restart_responses, sim_substeps, simulate_spec, sse)
 from ident.fixed_order import weighted_rows
 from ident.least_squares import bounded_lm, secant_lm
+from ident.portable_math import exp, log
 
 if TYPE_CHECKING:
     from ident.regression import Regression
@@ -130,7 +131,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
     nb = 8 if fit_base else 0
     logs = np.array(logs, dtype=bool)
     ze = ep0[idx] / s_ep if idx else np.zeros(0)
-    ze[logs] = np.log(ze[logs])
+    ze[logs] = log(ze[logs])
     z0 = np.concatenate([th0[:nb] / s_th[:nb], ze])
     lb = np.concatenate([np.full(nb, -np.inf), lo]) if idx else np.full(nb, -np.inf)
     ub = np.concatenate([np.full(nb, np.inf), hi]) if idx else np.full(nb, np.inf)
@@ -157,7 +158,7 @@ def fit_spec(spec: ModelSpec, chunk: Chunk, *, fit_base: bool = True, fit_effect
         EP = np.repeat(ep0[None, :], len(Z), axis=0)
         if idx:
             ZE = Z[:, nb:].copy()
-            ZE[:, logs] = np.exp(ZE[:, logs])
+            ZE[:, logs] = exp(ZE[:, logs])
             EP[:, idx] = ZE * s_ep
         return TH, EP
 

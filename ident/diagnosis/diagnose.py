@@ -60,6 +60,7 @@ from ident.diagnosis.spec import Chunk, ModelSpec, make_chunk, residual, rest_re
 from ident.diagnosis.disturbance import analyse_disturbance, block_input, equivalent_disturbance
 from ident.diagnosis.residuals import localise
 from ident.axis_model import AxisModel
+from ident.fixed_order import dot, lstsq, matvec, norm, sum_squares
 from ident.model import BASE_KEYS, base_vector
 
 __all__ = ["Candidate", "Diagnosis", "diagnose"]
@@ -199,8 +200,8 @@ def _check(name: str, x_r: np.ndarray, x: np.ndarray, segment: np.ndarray | None
 
 
 def _fit_pct(e: np.ndarray, r: np.ndarray) -> float:
-    den = float(np.linalg.norm(e - e.mean()))
-    return 100.0 * (1.0 - float(np.linalg.norm(r)) / den) if den > 0 else float("nan")
+    den = norm(e - e.mean())
+    return 100.0 * (1.0 - norm(r) / den) if den > 0 else float("nan")
 
 
 def _fold_masks(starts: np.ndarray, blocks: int = 6) -> tuple[np.ndarray, np.ndarray]:
@@ -248,12 +249,12 @@ class _Scored:
 
     def fold_sse(self) -> list[float]:
         with np.errstate(all="ignore"):
-            return [float(r @ r) if np.all(np.isfinite(r)) else math.inf for r in self.test_r]
+            return [sum_squares(r) if np.all(np.isfinite(r)) else math.inf for r in self.test_r]
 
     @property
     def raw_sse(self) -> float:
         with np.errstate(all="ignore"):
-            v = float(sum(float(r @ r) for r in self.raw_r))
+            v = float(sum(sum_squares(r) for r in self.raw_r))
         return v if math.isfinite(v) else math.inf
 
     @property
@@ -264,7 +265,7 @@ class _Scored:
 
     def raw_fold_sse(self) -> list[float]:
         with np.errstate(all="ignore"):
-            return [float(r @ r) if np.all(np.isfinite(r)) else math.inf for r in self.raw_r]
+            return [sum_squares(r) if np.all(np.isfinite(r)) else math.inf for r in self.raw_r]
 
 
 def _best_reference(scs: list["_Scored"], keep: tuple[str, ...], folds, pool: ThreadPoolExecutor, scored,
@@ -432,7 +433,7 @@ def ar_whitener(r: np.ndarray, max_order: int) -> np.ndarray:
             phi = solve_toeplitz(acf[:p], acf[1 : p + 1])
         except np.linalg.LinAlgError:
             break
-        s2 = float(acf[0] - phi @ acf[1 : p + 1])
+        s2 = float(acf[0] - dot(phi, acf[1 : p + 1]))
         if s2 <= 0:
             break
         bic = n * math.log(s2) + p * math.log(n)
@@ -501,7 +502,7 @@ def evidence(sc: "_Scored", ref: "_Scored", k: int, cfg: DiagnosisConfig) -> dic
                 ne = float(r1.size)
             else:
                 ne = r1.size / correlation_time(r1)
-            s0, s1 = float(r0 @ r0), float(r1 @ r1)
+            s0, s1 = sum_squares(r0), sum_squares(r1)
             if s0 > 0 and s1 > 0:
                 lr += ne * math.log(s0 / s1)
                 n_eff += ne
@@ -840,7 +841,7 @@ def _diagnose(x_r: np.ndarray, x: np.ndarray, Ts: float, given: ModelSpec, segme
         if cfg.accept_on_windows:
             r = window_residual(s, i)
             with np.errstate(all="ignore"):
-                v = float(r @ r)
+                v = sum_squares(r)
             return v if math.isfinite(v) else math.inf
         return sse(s, folds[i][1])
 
@@ -1150,10 +1151,9 @@ def _external_force(base: ModelSpec, full: Chunk, val: Chunk | None, disturbance
     # recording has taken up the load's mean (as a friction offset, a gain), which the
     # constant gives back; with a base fitted elsewhere the scale is ~1 and the constant ~0
     E = np.column_stack([effect, steady])
-    coef = (np.linalg.lstsq(E, -r0, rcond=None)[0] if np.all(np.isfinite(E)) and np.all(np.isfinite(r0))
-            else np.zeros(2))
-    r1 = r0 + E @ coef
-    n0, n1 = float(np.linalg.norm(r0)), float(np.linalg.norm(r1))
+    coef = lstsq(E, -r0) if np.all(np.isfinite(E)) and np.all(np.isfinite(r0)) else np.zeros(2)
+    r1 = r0 + matvec(E, coef)
+    n0, n1 = norm(r0), norm(r1)
     gain = 1.0 - n1 / n0 if n0 > 0 and np.isfinite(n1) else -math.inf
     blocks = analysis["blocks"]
     added = 2 * len(blocks) + 2

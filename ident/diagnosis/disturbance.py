@@ -34,6 +34,8 @@ import numpy as np
 
 from ident.diagnosis.residuals import (BLOCK_MIN_S, SEGMENT_EDGE_S, excursion_blocks, position_periodogram,
                                        reversal_times, time_since)
+from ident.fixed_order import dot, lstsq, matvec, norm, sum_squares
+from ident.portable_math import exp, geomspace
 
 __all__ = ["equivalent_disturbance", "analyse_disturbance", "block_input", "DISTURBANCE_BAND_HZ"]
 
@@ -117,14 +119,13 @@ def equivalent_disturbance(x_r: np.ndarray, x: np.ndarray, Ts: float, theta: np.
 
 def _explained(y: np.ndarray, A: np.ndarray) -> tuple[float, np.ndarray]:
     """(share of ‖y‖² the columns of A explain by least squares, the fit)."""
-    den = float(y @ y)
+    den = sum_squares(y)
     if den <= 0 or A.size == 0:
         return 0.0, np.zeros_like(y)
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
-    coef, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
-    fit = (A / scale) @ coef
-    return float(fit @ fit) / den, fit
+    fit = matvec(A / scale, lstsq(A / scale, y))
+    return sum_squares(fit) / den, fit
 
 
 def _blocks(y: np.ndarray, Ts: float, starts: np.ndarray) -> list[tuple[int, int]]:
@@ -228,7 +229,7 @@ def _two_levels(levels: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     order = np.argsort(levels, kind="stable")
     lv, ln = levels[order], lengths[order]
     w1, s1 = np.cumsum(ln)[:-1], np.cumsum(ln * lv)[:-1]
-    w2, s2 = ln.sum() - w1, float(ln @ lv) - s1
+    w2, s2 = ln.sum() - w1, dot(ln, lv) - s1
     between = s1 ** 2 / w1 + s2 ** 2 / w2  # what a split explains; the within-cluster SS is the rest
     cut = int(np.argmax(between)) + 1
     low = np.zeros(levels.size, dtype=bool)
@@ -263,7 +264,7 @@ def _state_blocks(wl: np.ndarray, A: np.ndarray, Ts: float,
             out[i:j] = False
         if np.count_nonzero(out) <= A1.shape[1]:
             break
-        fit = A1 @ _lstsq(A1[out], wl[out])
+        fit = matvec(A1, _lstsq(A1[out], wl[out]))
         new = find(wl - fit, Ts, starts)
         if new == spans:
             break
@@ -275,8 +276,7 @@ def _lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Least-squares coefficients with the columns scaled to unit norm (then unscaled)."""
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
-    coef, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
-    return coef / scale
+    return lstsq(A / scale, y) / scale
 
 
 def _block_columns(spans: list[tuple[int, int]], n: int) -> np.ndarray:
@@ -304,11 +304,11 @@ def _blocks_test(wl: np.ndarray, A: np.ndarray, spans: list[tuple[int, int]]) ->
     n = wl.size
     one = np.ones((n, 1))
     B = _block_columns(spans, n)
-    den = float(wl @ wl) or 1.0
+    den = sum_squares(wl) or 1.0
 
     def r2(M: np.ndarray) -> tuple[float, np.ndarray]:
-        res = wl - M @ _lstsq(M, wl)
-        return 1.0 - float(res @ res) / den, res
+        res = wl - matvec(M, _lstsq(M, wl))
+        return 1.0 - sum_squares(res) / den, res
 
     r2_state, _ = r2(np.column_stack([A, one]))
     r2_blocks, _ = r2(np.column_stack([B, one]))
@@ -360,12 +360,12 @@ def analyse_disturbance(w: np.ndarray, x_r: np.ndarray, x: np.ndarray, v_r: np.n
     # velocity: a friction curve, either direction (Coulomb, viscous, Stribeck-like decays)
     cols = [sgn, v_r]
     for vs in (0.01 * vmax, 0.05 * vmax):
-        cols.append(sgn * np.exp(-sp / vs))
+        cols.append(sgn * exp(-sp / vs))
     families["velocity"] = np.column_stack(cols)
     # position: the best single period of a periodogram against position
     span = float(np.ptp(x))
     if span > 0:
-        periods = np.geomspace(max(span / 500.0, 0.05), span, 120)
+        periods = geomspace(max(span / 500.0, 0.05), span, 120)
         share, _ = position_periodogram(x, wl, periods, constant=False)
         if np.max(share) > 0.0:
             P = float(periods[int(np.argmax(share))])
@@ -434,5 +434,5 @@ def _words(res: dict) -> str:
 
 def fit_pct(e: np.ndarray, r: np.ndarray) -> float:
     """SPEC §5 tracking-error fit of a residual ``r`` = x̂ − x against ``e`` = x_r − x, %."""
-    den = float(np.linalg.norm(e - e.mean()))
-    return 100.0 * (1.0 - float(np.linalg.norm(r)) / den) if den > 0 else math.nan
+    den = norm(e - e.mean())
+    return 100.0 * (1.0 - norm(r) / den) if den > 0 else math.nan

@@ -38,6 +38,7 @@ from core.effects import MODEL, shown_unit
 from ident.diagnosis.augmented import EP_INDEX, MODE_SLOTS
 from ident.diagnosis.config import DiagnosisConfig
 from ident.diagnosis.spec import Chunk, ModelSpec, simulate_spec, sse
+from ident.portable_math import geomspace
 
 __all__ = ["Effect", "TimeDelay", "EFFECT_MODELS", "effect_parameters", "cascade_motor_share", "motor_shares",
            "told"]
@@ -333,7 +334,7 @@ class Resonance(Effect):
                  and max(p.get("share_above_20_hz", 0.0), p.get("power_share", 0.0)) >= cfg.peak_min_share]
         # then a log grid over the band machine-tool modes occupy (10 Hz up to 0.3/Ts)
         fs = list(peaks)
-        for f in np.geomspace(10.0, 0.3 / Ts, cfg.mode_grid_points):
+        for f in geomspace(10.0, 0.3 / Ts, cfg.mode_grid_points):
             if all(abs(math.log(f / c)) > 0.2 for c in fs):
                 fs.append(float(f))
         shares = dict.fromkeys((0.0,) + motor_shares(base.theta))
@@ -569,9 +570,9 @@ class CyclicError(Effect):
         ep = spec.ep
         kind = _variants(self.name, "kind")[int(spec.modes[MODE_SLOTS["cyclic_error"]])]
         c_s, c_c = ep[EP_INDEX["amplitude_sin"]], ep[EP_INDEX["amplitude_cos"]]
-        return {"period_mm": float(ep[EP_INDEX["period_mm"]]), "amplitude": float(np.hypot(c_s, c_c)),
+        return {"period_mm": float(ep[EP_INDEX["period_mm"]]), "amplitude": math.hypot(float(c_s), float(c_c)),
                 "amplitude_unit": REGISTRY[self.name].parameter("amplitude").unit_by_variant[kind],
-                "phase_rad": float(np.arctan2(c_c, c_s)), "kind": kind}
+                "phase_rad": math.atan2(float(c_c), float(c_s)), "kind": kind}
 
     def set_arrays(self, p, ep, modes):
         ep[EP_INDEX["period_mm"]] = p["period_mm"]

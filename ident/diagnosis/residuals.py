@@ -21,6 +21,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ident.fixed_order import dot, lstsq, matvec, sum_squares
+from ident.portable_math import geomspace
+
 __all__ = [
     "reversal_times",
     "time_since",
@@ -167,7 +170,7 @@ def time_blocks(r: np.ndarray, Ts: float, starts: np.ndarray, count: int = 20) -
     listed in time order, the first ``count``.
     """
     spans = excursion_blocks(r, Ts, starts)
-    energy = np.array([float(r[i:j] @ r[i:j]) for i, j in spans])
+    energy = np.array([sum_squares(r[i:j]) for i, j in spans])
     keep: list[tuple[int, int]] = []
     if spans:
         order = np.argsort(energy)[::-1]
@@ -234,7 +237,7 @@ def position_periodogram(
     """
     x = np.asarray(x, dtype=float)
     rc = r - r.mean() if constant else np.asarray(r, dtype=float)
-    den = float(rc @ rc) or 1.0
+    den = sum_squares(rc) or 1.0
     periods_mm = np.asarray(periods_mm, dtype=float)
     share = np.zeros(periods_mm.size)
     amp = np.zeros(periods_mm.size, dtype=complex)
@@ -247,14 +250,14 @@ def position_periodogram(
             C -= C.mean(axis=1, keepdims=True)
         gss, gcc, gsc = (np.einsum("ij,ij->i", S, S), np.einsum("ij,ij->i", C, C),
                          np.einsum("ij,ij->i", S, C))
-        bs, bc = S @ rc, C @ rc
+        bs, bc = matvec(S, rc), matvec(C, rc)
         det = gss * gcc - gsc ** 2
         for j in range(det.size):
             if det[j] > 1e-12 * gss[j] * gcc[j] and det[j] > 0:
                 a = (gcc[j] * bs[j] - gsc[j] * bc[j]) / det[j]
                 b = (gss[j] * bc[j] - gsc[j] * bs[j]) / det[j]
             else:  # sine and cosine (nearly) collinear over the travel: minimum-norm fit
-                (a, b), *_ = np.linalg.lstsq(np.column_stack([S[j], C[j]]), rc, rcond=None)
+                a, b = lstsq(np.column_stack([S[j], C[j]]), rc)
             share[i0 + j] = (a * bs[j] + b * bc[j]) / den
             amp[i0 + j] = a + 1j * b
     return share, amp
@@ -309,14 +312,14 @@ def peak_in_band(peaks: list[dict], lo_hz: float, hi_hz: float | None = None, to
 def _xcorr(a: np.ndarray, b: np.ndarray, lags: np.ndarray) -> np.ndarray:
     a = a - a.mean()
     b = b - b.mean()
-    den = float(np.sqrt((a @ a) * (b @ b))) or 1.0
+    den = float(np.sqrt(sum_squares(a) * sum_squares(b))) or 1.0
     n = a.size
     out = np.empty(lags.size)
     for i, L in enumerate(lags):
         if L >= 0:
-            out[i] = float(a[L:] @ b[: n - L]) / den
+            out[i] = dot(a[L:], b[: n - L]) / den
         else:
-            out[i] = float(a[: n + L] @ b[-L:]) / den
+            out[i] = dot(a[: n + L], b[-L:]) / den
     return out
 
 
@@ -429,7 +432,7 @@ def localise(
     if span > 0:
         p_min = max(4.0 * float(np.median(np.abs(np.diff(x))[moving[1:]] if np.any(moving[1:]) else [1e-3])), 0.05)
         p_min = max(p_min, span / 2000.0)
-        periods = np.geomspace(p_min, max(span, p_min * 1.5), 300)
+        periods = geomspace(p_min, max(span, p_min * 1.5), 300)
         share, amp = position_periodogram(x, r, periods)
         i = int(np.argmax(share))
         res["position_periodic"] = {

@@ -23,6 +23,8 @@ from ident.diagnosis.augmented import (
     sensitivities,
     simulate_augmented,
 )
+from ident.fixed_order import sum_squares
+from ident.portable_math import exp
 
 __all__ = ["Chunk", "ModelSpec", "make_chunk", "simulate_spec", "residual", "residual_jacobian", "sse", "sim_substeps"]
 
@@ -588,7 +590,7 @@ def estimated_states(r: np.ndarray, effects: tuple[str, ...], ep: np.ndarray, mo
         if f > 0.0 and 0.0 <= zeta < 1.0:
             t = (np.arange(chunk.n) - first[win]) * chunk.Ts
             om = 2.0 * math.pi * f
-            env = chunk.w * np.exp(-zeta * om * t)
+            env = chunk.w * exp(-zeta * om * t)
             wd = om * math.sqrt(1.0 - zeta * zeta)
             basis += [(env * np.cos(wd * t))[m], (env * np.sin(wd * t))[m]]
     k = win[m]
@@ -616,7 +618,7 @@ def sse(spec: ModelSpec, chunk: Chunk, mask: np.ndarray | None = None) -> float:
     """Weighted sum of squared free-run residuals, mm² (inf when the simulation diverges)."""
     r = residual(spec, chunk, mask)
     with np.errstate(all="ignore"):
-        v = float(r @ r)
+        v = sum_squares(r)
     return v if np.isfinite(v) else float("inf")
 
 

@@ -33,9 +33,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from core.errors import IdentificationError, InputError
+from ident.fixed_order import matvec, qr_r, solve_upper, sum_squares
 from ident.model import THETA_NAMES, Bounds, DriveModel, alphas_from_search, alphas_jacobian
 
 __all__ = ["SolverResult", "ReducedObjective", "check_regression", "cost_eq312", "resolve_box"]
@@ -113,8 +113,7 @@ def check_regression(Phi, Y) -> tuple[np.ndarray, np.ndarray]:
 
 def cost_eq312(Phi: np.ndarray, Y: np.ndarray, theta: np.ndarray) -> float:
     """f of eq. 3.12: 1/2 ||Y - Phi theta||^2 (mm^2), on the full regression."""
-    r = Y - Phi @ np.asarray(theta, dtype=float)
-    return 0.5 * float(r @ r)
+    return 0.5 * sum_squares(Y - matvec(Phi, np.asarray(theta, dtype=float)))
 
 
 def resolve_box(bounds: Bounds, sample_period: float | None) -> tuple[np.ndarray, np.ndarray]:
@@ -143,8 +142,7 @@ class ReducedObjective:
         self.scale = np.linalg.norm(Phi, axis=0)  # column scaling: theta_scaled = scale * theta
         s1, s2 = self.scale[:3], self.scale[3:]
         Z = np.column_stack([Phi[:, 3:] / s2, Phi[:, :3] / s1, Y])  # [Phi_2, Phi_1, Y]
-        R = np.linalg.qr(Z, mode="r")
-        R = R * np.sign(np.where(np.diag(R) == 0, 1.0, np.diag(R)))[:, None]  # positive diagonal
+        R = qr_r(Z)  # positive diagonal; a fixed order of operations: the same R on any machine
         self.R = R
         d8 = np.abs(np.diag(R[:8, :8]))
         self.condition_number = float(np.linalg.cond(R[:8, :8])) if d8.min() > 0 else math.inf
@@ -157,10 +155,10 @@ class ReducedObjective:
         # f = 1/2 (||M mu||^2 + rho^2), mu = [1, alpha_i, alpha_1, alpha_2]   (eq. 4.10)
         self.M = np.column_stack([-r1y, R11 * s1])
         # theta_2 = R* - P* theta_1  (eq. 4.11), both unscaled
-        self.R_star = solve_triangular(R22, r2y) / s2
-        self.P_star = solve_triangular(R22, R21 * s1) / s2[:, None]
+        self.R_star = solve_upper(R22, r2y) / s2
+        self.P_star = solve_upper(R22, R21 * s1) / s2[:, None]
         # unconstrained least squares (Case 1 of Table 3.1)
-        theta1 = solve_triangular(R11, r1y) / s1
+        theta1 = solve_upper(R11, r1y) / s1
         self.theta_ls = np.concatenate([theta1, self.theta2(theta1)])
 
     # ---- the pieces of eq. 4.11-4.12 ----------------------------------------------------
@@ -182,7 +180,8 @@ class ReducedObjective:
 
     def theta2(self, theta1: np.ndarray) -> np.ndarray:
         """[beta_0..delta-] from theta_1 (eq. 4.9/4.11); theta1 shape (3,) or (n, 3)."""
-        return self.R_star - np.asarray(theta1) @ self.P_star.T
+        # einsum, not a BLAS product: the same θ₂ bits on any machine (ident.fixed_order)
+        return self.R_star - np.einsum("...j,ij->...i", np.asarray(theta1, dtype=float), self.P_star)
 
     def theta(self, wn, zeta, p) -> np.ndarray:
         """Full theta (eq. 3.11) for search variables (rad/s, -, rad/s); shape (8,) or (n, 8)."""
@@ -228,12 +227,12 @@ class ReducedObjective:
     def gradient(self, wn: float, zeta: float, p: float) -> np.ndarray:
         """d f / d(wn, zeta, p) at one point (units 1/(rad/s), 1, 1/(rad/s) times mm^2)."""
         r = self.residual(wn, zeta, p)
-        J = self.M[:, 1:] @ alphas_jacobian(wn, zeta, p)  # d r / d(wn, zeta, p)
-        return J.T @ r
+        J = self.jacobian(wn, zeta, p)  # d r / d(wn, zeta, p)
+        return np.einsum("ki,k->i", J, r)
 
     def jacobian(self, wn: float, zeta: float, p: float) -> np.ndarray:
         """d r / d(wn, zeta, p), shape (3, 3)."""
-        return self.M[:, 1:] @ alphas_jacobian(wn, zeta, p)
+        return np.einsum("ij,jk->ik", self.M[:, 1:], alphas_jacobian(wn, zeta, p))
 
     def result(self, theta: np.ndarray, solver: str, bounds: Bounds | None, sample_period: float | None,
                search: tuple[float, float, float] | None, elapsed_s: float,

@@ -45,6 +45,7 @@ import numpy as np
 
 from core.errors import IdentificationError, InputError, RapidIdentWarning
 from ident.model import Bounds, DriveModel, canonical_search
+from ident.portable_math import exp, geomspace
 from ident.solvers.common import ReducedObjective, SolverResult, resolve_box
 
 __all__ = ["solve_exact", "kkt_certificate"]
@@ -67,9 +68,9 @@ def _grid_search(obj: ReducedObjective, lo: np.ndarray, hi: np.ndarray, shape: t
                  n_starts: int) -> tuple[list[np.ndarray], float, int]:
     """Reduced cost on a (log wn, zeta, log p) grid; best ``n_starts`` separated points."""
     n_w, n_z, n_p = shape
-    wn = np.geomspace(lo[0], hi[0], n_w)
+    wn = geomspace(lo[0], hi[0], n_w)
     zeta = np.linspace(lo[1], hi[1], n_z)
-    p = np.geomspace(lo[2], hi[2], n_p)
+    p = geomspace(lo[2], hi[2], n_p)
     F = obj.cost(wn[:, None, None], zeta[None, :, None], p[None, None, :])
     flat = F.ravel()
     k = min(flat.size, 20 * n_starts + 200)
@@ -178,7 +179,7 @@ def _local_probe(obj: ReducedObjective, v: np.ndarray, lo: np.ndarray, hi: np.nd
     dirs = np.vstack([np.eye(3), -np.eye(3), rng.standard_normal((40, 3))])
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     U = np.concatenate([np.clip(u0 + h * dirs, ulo, uhi) for h in (1e-5, 1e-4, 1e-3, 1e-2)])
-    F = obj.cost(np.exp(U[:, 0]), U[:, 1], np.exp(U[:, 2]))
+    F = obj.cost(exp(U[:, 0]), U[:, 1], exp(U[:, 2]))
     return bool(np.all(F >= f0 * (1 - 1e-11)))
 
 

@@ -2,9 +2,10 @@
 
     minimise f(theta) = 1/2 (Y - Phi theta)^T (Y - Phi theta)
 
-Solved on the column-scaled regressor Phi D^-1 (D = column 2-norms) with an SVD-based
-``numpy.linalg.lstsq`` -- never by inverting Phi^T Phi, whose condition number is the square
-of Phi's.  The columns of Phi span many decades (e_i ~ 1e-2 mm s, xddot ~ 1e3 mm/s^2), so the
+Solved on the column-scaled regressor Phi D^-1 (D = column 2-norms) by Householder QR in a
+fixed order of operations (:func:`ident.fixed_order.lstsq`: the same bits on any machine) --
+never by inverting Phi^T Phi, whose condition number is the square of Phi's; its singular
+values give the rank and condition number.  The columns of Phi span many decades (e_i ~ 1e-2 mm s, xddot ~ 1e3 mm/s^2), so the
 scaling is what makes the reported condition number meaningful.  Nothing keeps the poles
 inside the bounds: the result may be unstable or poorly damped (thesis section 3.3); its
 violated constraints are listed in ``details["violated_constraints"]``.
@@ -19,6 +20,7 @@ import warnings
 import numpy as np
 
 from core.errors import IdentificationError, RapidIdentWarning
+from ident.fixed_order import lstsq
 from ident.model import Bounds, DriveModel
 from ident.solvers.common import SolverResult, check_regression, cost_eq312
 
@@ -50,7 +52,8 @@ def solve_ls(Phi: np.ndarray, Y: np.ndarray, bounds: Bounds | None = None, *,
     t0 = time.perf_counter()
     Phi, Y = check_regression(Phi, Y)
     D = np.linalg.norm(Phi, axis=0)
-    theta_s, _, rank, sv = np.linalg.lstsq(Phi / D, Y, rcond=None)
+    sv = np.linalg.svd(Phi / D, compute_uv=False)  # reported: the rank and condition number
+    rank = int(np.sum(sv > max(Phi.shape) * np.finfo(float).eps * sv[0]))
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
     if rank < 8:
         raise IdentificationError(f"regressor Phi is rank deficient (rank {rank} of 8): the recording "
@@ -58,7 +61,7 @@ def solve_ls(Phi: np.ndarray, Y: np.ndarray, bounds: Bounds | None = None, *,
     if cond > cond_warn:
         warnings.warn(f"least squares is ill-conditioned: condition number of scaled Phi = {cond:.3g}",
                       RapidIdentWarning, stacklevel=2)
-    theta = theta_s / D
+    theta = lstsq(Phi / D, Y) / D  # in a fixed order: the same θ on any machine
     model = DriveModel.from_theta(theta)
     details: dict = {"singular_values_scaled": sv.tolist()}
     if bounds is not None:
