@@ -16,6 +16,7 @@ import pytest
 from ident.diagnosis import diagnose
 from ident.diagnosis.augmented import EP_INDEX, N_EP, N_MODES, segment_starts, simulate_augmented
 from ident.diagnosis.config import DEFAULT
+from ident.diagnosis.diagnose import Candidate, _why_not
 from ident.diagnosis.effects import EFFECT_MODELS
 from ident.diagnosis.intervals import at_bound
 from ident.diagnosis.spec import ModelSpec, make_chunk
@@ -113,3 +114,18 @@ def test_a_clean_drive_gives_none_whatever_bound_its_trial_mode_ends_on():
     # refused by the held-out evidence itself (likelihood ratio, or too small a share)
     assert not c.accepted
     assert not (c.score["significant"] and c.score["held_out_residual_reduction"] >= DEFAULT.min_relevant)
+
+
+def _candidate(**score) -> Candidate:
+    return Candidate("resonance", {"freq_hz": 253.0, "damping": 0.15}, 90.0, 92.0, False,
+                              {"held_out_residual_reduction": 0.26, "required_reduction": 0.03, **score})
+
+
+def test_a_refused_candidate_says_why_in_the_order_of_the_rule():
+    assert _why_not(_candidate(significant=False)) == "not significant"
+    small = _why_not(_candidate(significant=True, held_out_residual_reduction=0.01))
+    assert small == "significant, but it removes 1 % of the held-out residual, under 3 %"
+    # a mode on the damping bound is told as what it is, with what it removes
+    bound = _why_not(_candidate(significant=True, size_test="failed: not a lightly damped mode (ζ = 0.15 "
+                                                                     "on the bound of a lightly damped one, 253 Hz)"))
+    assert bound.startswith("significant, removes 26 % of the held-out residual, not named: not a lightly damped")

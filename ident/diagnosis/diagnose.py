@@ -1219,6 +1219,22 @@ def _rms_words(before_mm: float, after_mm: float) -> str:
     return f"residual rms {1e3 * before_mm:.3g} → {1e3 * after_mm:.3g} µm ({change:+.0f} %)".replace("-", "−")
 
 
+def _why_not(c: Candidate) -> str:
+    """Why a candidate was not named, in the order the rule of §4 asks: the evidence, the size,
+    then what its name means — a mode whose damping is on a lightly damped mode's bound still
+    says so, with what it removes, rather than only "not significant"."""
+    sc = c.score
+    if not sc.get("significant", False):
+        return "not significant"
+    gain, need = sc.get("held_out_residual_reduction", 0.0), sc.get("required_reduction", 0.0)
+    if gain < need:
+        return f"significant, but it removes {100 * gain:.0f} % of the held-out residual, under {100 * need:.0f} %"
+    test = str(sc.get("size_test", ""))
+    if test.startswith("failed: "):
+        return f"significant, removes {100 * gain:.0f} % of the held-out residual, not named: {test[len('failed: '):]}"
+    return "not named"
+
+
 def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candidate], before: float,
              after: float, scheme: str, Ts: float) -> str:
     where = _where_words(loc)
@@ -1252,7 +1268,7 @@ def _summary(loc: dict, accepted: list[str], final: ModelSpec, cands: list[Candi
         fr = "held_out_free_run_" if "held_out_free_run_rms_before_mm" in best.score else "held_out_"
         tail = (f" (best candidate {best.effect}: reference fit {_fit_words(best.fit_before_pct, best.fit_after_pct)}, "
                 f"{_rms_words(best.score[fr + 'rms_before_mm'], best.score[fr + 'rms_after_mm'])}, "
-                f"not significant)")
+                f"{_why_not(best)})")
     wh = loc.get("whiteness", {})
     white = "white" if wh.get("white") else "not white"
     return (f"{head} Left out: none — no effect of the vocabulary improves the held-out fit significantly"
