@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["dot", "lstsq", "matvec", "norm", "normal_products", "qr_r", "solve", "solve_upper", "sum_squares",
-           "weighted_rows"]
+__all__ = ["dot", "lstsq", "matvec", "moving_mean", "norm", "normal_products", "qr_r", "solve", "solve_upper",
+           "sum_squares", "weighted_rows"]
 
 #: Independent partial sums per dot product (combined in a fixed order): four keep the
 #: adder's pipeline busy without making the order depend on the machine.
@@ -248,3 +248,25 @@ def solve_upper(R: np.ndarray, B: np.ndarray) -> np.ndarray:
 def norm(v: np.ndarray) -> float:
     """‖v‖₂ of a vector in a fixed order (``np.linalg.norm`` of a vector is a BLAS dot)."""
     return float(np.sqrt(sum_squares(v)))
+
+
+@njit(cache=True, nogil=True)
+def _moving_mean(y: np.ndarray, k: int, out: np.ndarray) -> None:
+    n = y.size
+    lead = (k - 1) // 2
+    for i in range(n):
+        lo, hi = max(i + lead - k + 1, 0), min(i + lead, n - 1)
+        s = 0.0
+        for j in range(lo, hi + 1):
+            s += y[j]
+        out[i] = s / k
+
+
+def moving_mean(y: np.ndarray, k: int) -> np.ndarray:
+    """Mean over ``k`` samples centred as ``np.convolve(y, np.ones(k) / k, mode="same")``
+    centres it (zeros beyond the ends), each window summed left to right — numpy's
+    convolve is a BLAS dot, whose order is the machine's."""
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    out = np.empty(y.size)
+    _moving_mean(y, int(k), out)
+    return out

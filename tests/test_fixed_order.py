@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from ident.fixed_order import (dot, lstsq, matvec, norm, normal_products, qr_r, solve, solve_upper, sum_squares,
-                               weighted_rows)
+from ident.fixed_order import (dot, lstsq, matvec, moving_mean, norm, normal_products, qr_r, solve, solve_upper,
+                               sum_squares, weighted_rows)
 
 
 @pytest.fixture
@@ -111,3 +111,9 @@ def test_matvec_and_norm_sum_each_row_left_to_right(regression):
     expected = np.array([sum(float(a) * float(b) for a, b in zip(row, x)) for row in A[:50]])
     assert np.array_equal(matvec(A[:50], x), expected)  # the written order, bit for bit
     assert norm(y) == pytest.approx(float(np.linalg.norm(y)), rel=1e-14)
+
+
+@pytest.mark.parametrize("k", [1, 2, 5, 50, 51])
+def test_moving_mean_is_numpys_centred_convolution_with_a_box(k):
+    y = np.random.default_rng(3).standard_normal(400)
+    assert np.allclose(moving_mean(y, k), np.convolve(y, np.ones(k) / k, mode="same"), rtol=0, atol=1e-15)

@@ -87,3 +87,16 @@ def test_pulses_on_half_of_the_time_are_found_where_they_are():
     assert len(found) == len(on)
     for (a, b), (fa, fb) in zip(on, found):
         assert abs(fa - a) <= 5 and abs(fb - b) <= 5
+
+
+@pytest.mark.parametrize("wn", [0.02, 0.2, 0.99])
+def test_the_low_pass_is_scipys_butterworth_and_zero_phase_filter_to_rounding(wn):
+    from scipy import signal
+
+    b, a = d._butter2(wn)
+    b0, a0 = signal.butter(2, wn)
+    assert np.allclose(b, b0, rtol=1e-13, atol=1e-16) and np.allclose(a, a0, rtol=1e-13, atol=1e-16)
+    x = np.cumsum(np.random.default_rng(5).standard_normal(600))
+    for n in (600, 16):
+        y = d._filtfilt(b, a, x[:n], min(9, n - 1))
+        assert np.allclose(y, signal.filtfilt(b, a, x[:n], padlen=min(9, n - 1)), rtol=0, atol=1e-12 * np.abs(x).max())

@@ -61,17 +61,46 @@ BLOCK_ALPHA = 0.01
 BLOCK_ROUNDS = 4
 
 
+def _butter2(wn: float) -> tuple[np.ndarray, np.ndarray]:
+    """2nd-order Butterworth low-pass (b, a) at ``wn`` × Nyquist by the bilinear transform in
+    closed form: ``scipy.signal.butter(2, wn)`` without its polynomial products, whose last
+    bits follow the machine's BLAS (numpy's convolve is a BLAS dot)."""
+    K = math.tan(0.5 * math.pi * wn)
+    s2 = math.sqrt(2.0)
+    g = 1.0 / (1.0 + s2 * K + K * K)
+    kk = K * K * g
+    return np.array([kk, 2.0 * kk, kk]), np.array([1.0, 2.0 * (K * K - 1.0) * g, (1.0 - s2 * K + K * K) * g])
+
+
+def _filtfilt(b: np.ndarray, a: np.ndarray, x: np.ndarray, padlen: int) -> np.ndarray:
+    """``scipy.signal.filtfilt(b, a, x, padlen=padlen)`` (odd extension, the steady state of a
+    step as initial state) with that state in closed form (scipy's lfilter_zi solves it with
+    LAPACK); ``lfilter`` itself is a loop in a fixed order."""
+    from scipy.signal import lfilter
+
+    n = a.size
+    B = b[1:] - a[1:] * b[0]
+    zi = np.empty(n - 1)  # zi = A zi + B for the companion matrix A of a: solved by substitution
+    zi[0] = float(np.sum(B)) / float(np.sum(a))
+    asum, csum = 1.0, 0.0
+    for k in range(1, n - 1):
+        asum += a[k]
+        csum += b[k] - a[k] * b[0]
+        zi[k] = asum * zi[0] - csum
+    ext = np.concatenate([2.0 * x[0] - x[padlen:0:-1], x, 2.0 * x[-1] - x[-2:-padlen - 2:-1]])
+    y, _ = lfilter(b, a, ext, zi=zi * ext[0])
+    y, _ = lfilter(b, a, y[::-1], zi=zi * y[-1])
+    return y[::-1][padlen:-padlen]
+
+
 def _lowpass(y: np.ndarray, Ts: float, f_hz: float, starts: np.ndarray) -> np.ndarray:
     """Zero-phase 2nd-order Butterworth low-pass per segment (edges padded by reflection)."""
-    from scipy import signal  # half a second to import: only when the diagnosis runs
-
     out = np.array(y, dtype=float, copy=True)
-    wn = min(f_hz * 2.0 * Ts, 0.99)
-    b, a = signal.butter(2, wn)
+    b, a = _butter2(min(f_hz * 2.0 * Ts, 0.99))
     bounds = np.append(np.flatnonzero(starts), y.size)
     for s, e in zip(bounds[:-1], bounds[1:]):
         if e - s > 15:
-            out[s:e] = signal.filtfilt(b, a, y[s:e], padlen=min(3 * max(len(a), len(b)), e - s - 1))
+            out[s:e] = _filtfilt(b, a, y[s:e], min(3 * max(len(a), len(b)), e - s - 1))
     return out
 
 

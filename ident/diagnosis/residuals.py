@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ident.fixed_order import dot, lstsq, matvec, sum_squares
+from ident.fixed_order import dot, lstsq, matvec, moving_mean, sum_squares
 from ident.portable_math import geomspace
 
 __all__ = [
@@ -133,7 +133,7 @@ def excursion_blocks(y: np.ndarray, Ts: float, starts: np.ndarray) -> list[tuple
     start transient), not something arriving during the motion: it is left out.
     """
     k = max(int(round(0.05 / Ts)), 1)
-    ys = np.convolve(y, np.ones(k) / k, mode="same")
+    ys = moving_mean(y, k)
     sigma = 1.4826 * float(np.median(np.abs(ys - np.median(ys)))) or 1e-12
     hot = np.abs(ys - np.median(ys)) > BLOCK_SIGMAS * sigma
     out = []

@@ -17,10 +17,10 @@ symbolic toolbox.  Here the same optimum is found numerically:
 2. Case 1 (no constraint active): if the unconstrained least-squares polynomial has a
    factorisation inside the bounds, it is the optimum.
 3. Otherwise a global search: the reduced cost on a dense grid, log-spaced in wn and p,
-   linear in zeta (including zeta >= 1, real pole pairs), then bounded trust-region
-   refinement (scipy ``least_squares``, the reduced cost is a 3-residual least-squares
-   problem) from the best separated grid points and from the least-squares poles clipped to
-   the box; variables that reach a bound are snapped onto it and the rest re-polished, and a
+   linear in zeta (including zeta >= 1, real pole pairs), then a bounded local solve
+   (projected Levenberg–Marquardt with the analytic Jacobian, in a fixed order of
+   operations: the reduced cost is a 3-residual least-squares problem) from the best
+   separated grid points and from the least-squares poles clipped to the box; variables that reach a bound are snapped onto it and the rest re-polished, and a
    real-pole result is re-expressed in the canonical factorisation and refined again (a
    local search can stall on a fold of the (wn, zeta, p) chart, see
    :func:`ident.model.canonical_search`).
@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from core.errors import IdentificationError, InputError, RapidIdentWarning
+from ident.least_squares import bounded_lm
 from ident.model import Bounds, DriveModel, canonical_search
 from ident.portable_math import exp, geomspace
 from ident.solvers.common import ReducedObjective, SolverResult, resolve_box
@@ -89,9 +90,13 @@ def _grid_search(obj: ReducedObjective, lo: np.ndarray, hi: np.ndarray, shape: t
 
 
 def _refine(obj: ReducedObjective, v0: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Bounded local minimisation of the reduced cost from v0; snaps and re-polishes at bounds."""
-    from scipy.optimize import least_squares  # here: only constrained cases need it (0.3–0.6 s import)
+    """Bounded local minimisation of the reduced cost from v0; snaps and re-polishes at bounds.
 
+    The local solve is the projected Levenberg–Marquardt of :func:`ident.least_squares.bounded_lm`
+    with the analytic Jacobian: its products and solves run in a fixed order, where a
+    trust-region method on LAPACK's SVD ended in other last bits under another CPU's BLAS
+    kernels — and the output-error refinement amplifies those bits.
+    """
     ulo, uhi = _to_u(lo), _to_u(hi)
     u = np.clip(_to_u(v0), ulo, uhi)
     free = np.ones(3, dtype=bool)
@@ -103,21 +108,18 @@ def _refine(obj: ReducedObjective, v0: np.ndarray, lo: np.ndarray, hi: np.ndarra
             uu[free] = x
             return obj.residual(*_from_u(uu))
 
-        def jac(x):
+        def jac(x, cols):
             uu = fixed_u.copy()
             uu[free] = x
             v = _from_u(uu)
             J = obj.jacobian(*v) * np.array([v[0], 1.0, v[2]])  # chain rule to (ln wn, zeta, ln p)
-            return J[:, free]
+            return J[:, free][:, cols].T
 
         if free.any():
             x0 = np.clip(u[free], ulo[free], uhi[free])
-            inside = (x0 > ulo[free]) & (x0 < uhi[free])
-            # trf needs a strictly feasible start
-            x0 = np.where(inside, x0, np.clip(x0, ulo[free] + 1e-10, uhi[free] - 1e-10))
-            sol = least_squares(fun, x0, jac=jac, bounds=(ulo[free], uhi[free]), method="trf",
-                                x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15, max_nfev=400)
-            u[free] = sol.x
+            sol = bounded_lm(fun, x0, ulo[free], uhi[free], max_iter=400, ftol=1e-15, ftol_iter=2, xtol=1e-15,
+                             jac=jac)
+            u[free] = sol.z
         # snap variables that ended (numerically) on a bound; keep the snap only if not worse
         span = uhi - ulo
         near_lo = (u - ulo) <= 1e-6 * span
