@@ -180,7 +180,7 @@ class ReducedObjective:
 
     def theta2(self, theta1: np.ndarray) -> np.ndarray:
         """[beta_0..delta-] from theta_1 (eq. 4.9/4.11); theta1 shape (3,) or (n, 3)."""
-        # einsum, not a BLAS product: the same θ₂ bits on any machine (ident.fixed_order)
+        # einsum's own loops, not a BLAS product: the same θ₂ bits on any machine
         return self.R_star - np.einsum("...j,ij->...i", np.asarray(theta1, dtype=float), self.P_star)
 
     def theta(self, wn, zeta, p) -> np.ndarray:

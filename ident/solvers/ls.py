@@ -5,8 +5,9 @@
 Solved on the column-scaled regressor Phi D^-1 (D = column 2-norms) by Householder QR in a
 fixed order of operations (:func:`ident.fixed_order.lstsq`: the same bits on any machine) --
 never by inverting Phi^T Phi, whose condition number is the square of Phi's; its singular
-values give the rank and condition number.  The columns of Phi span many decades (e_i ~ 1e-2 mm s, xddot ~ 1e3 mm/s^2), so the
-scaling is what makes the reported condition number meaningful.  Nothing keeps the poles
+values give the rank and condition number.  The columns of Phi span many decades
+(e_i ~ 1e-2 mm s, xddot ~ 1e3 mm/s^2), so the scaling is what makes the reported condition
+number meaningful.  Nothing keeps the poles
 inside the bounds: the result may be unstable or poorly damped (thesis section 3.3); its
 violated constraints are listed in ``details["violated_constraints"]``.
 """
