@@ -34,7 +34,7 @@ import numpy as np
 
 from ident.diagnosis.residuals import (BLOCK_MIN_S, SEGMENT_EDGE_S, excursion_blocks, position_periodogram,
                                        reversal_times, time_since)
-from ident.fixed_order import dot, lstsq, matvec, norm, sum_squares
+from ident.fixed_order import dot, lstsq, matvec, sum_squares
 from ident.portable_math import exp, geomspace
 
 __all__ = ["equivalent_disturbance", "analyse_disturbance", "block_input", "DISTURBANCE_BAND_HZ"]
@@ -153,7 +153,8 @@ def _explained(y: np.ndarray, A: np.ndarray) -> tuple[float, np.ndarray]:
         return 0.0, np.zeros_like(y)
     scale = np.linalg.norm(A, axis=0)
     scale[scale == 0] = 1.0
-    fit = matvec(A / scale, lstsq(A / scale, y))
+    As = A / scale
+    fit = matvec(As, lstsq(As, y))
     return sum_squares(fit) / den, fit
 
 
@@ -460,8 +461,3 @@ def _words(res: dict) -> str:
     return (f"an acceleration that {what}: {100 * ex[name]:.0f} % of the unexplained acceleration "
             f"(rms {res['rms_mm_s2']:.3g} mm/s² below {res['band_hz']:.0f} Hz)")
 
-
-def fit_pct(e: np.ndarray, r: np.ndarray) -> float:
-    """SPEC §5 tracking-error fit of a residual ``r`` = x̂ − x against ``e`` = x_r − x, %."""
-    den = norm(e - e.mean())
-    return 100.0 * (1.0 - norm(r) / den) if den > 0 else math.nan
