@@ -109,6 +109,15 @@ def test_a_pause_of_a_replay_faster_than_real_time_is_not_read_as_wraps():
     assert u(500 % 240 + 1, 2e-5 * 499 + 0.15) == 500
 
 
+def test_a_replay_whose_average_rate_passes_the_controllers_is_still_numbered_as_it_reads():
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    got, ts = [], 0.0
+    for k in range(2000):  # served as fast as possible (10 µs a tick); the sender stalls 0.35 s at
+        ts += 0.35 if k == 300 else 1e-5  # tick 300, so that about tick 350 it has averaged 1 ms a tick
+        got.append(u(k % 240 + 1, ts))
+    assert got == list(range(2000))
+
+
 def test_ticks_missing_a_part_are_not_emitted_and_counted_lost():
     asm = TickAssembler(2, 2, CounterUnwrapper(240, 1, 0.001), 0.001)
     out = []
@@ -155,11 +164,23 @@ def test_a_counter_ahead_of_the_host_clock_is_a_restart():
         u(1, 0.500)  # counter back to 1 one period later
 
 
-def test_a_silence_the_jitter_cannot_resolve_is_refused():
+def stalling_sender(stall_ms: int) -> CounterUnwrapper:
+    """500 ticks of a 4-bit counter whose sender stalls ``stall_ms`` every 50 ticks, then sends what it held."""
     u = CounterUnwrapper(16, first=0, period_s=0.001)
-    for k in range(500):  # every 50 ticks the sender stalls 7 ms, then sends what it held
-        j = k % 50
-        u(k % 16, 0.001 * k + ((7 - j) * 0.00096 if j < 7 else 0.0))
+    for k in range(500):
+        j = (k + 25) % 50
+        u(k % 16, 0.001 * k + ((stall_ms - j) * 0.00096 if j < stall_ms else 0.0))
+    return u
+
+
+def test_a_silence_is_resolved_when_fewer_wraps_would_make_the_frame_later_than_twice_the_jitter():
+    u = stalling_sender(7)  # frames up to 6.7 ticks late; 24 ticks would make this one 16 late
+    k = 499 + 40
+    assert u(k % 16, 0.001 * k) == k
+
+
+def test_a_silence_the_jitter_cannot_resolve_is_refused():
+    u = stalling_sender(9)  # frames up to 8.6 ticks late: 16 ticks late is within twice that
     k = 499 + 40  # after 40 ticks of silence: 40 or 24 ticks?
     with pytest.raises(CounterError, match=r"cannot tell how many ticks passed \(40 or 24\)") as err:
         u(k % 16, 0.001 * k)

@@ -142,14 +142,21 @@ class CounterUnwrapper:
         d0 = (r - self._last_raw) % M
         Th = self.host_period()
         if self._replay(Th):
-            a = d0
-        else:
-            try:
-                a = self._advance(d0, ts, Th)
-            except CounterError:
-                if self.modulus == 1 or not self._maybe_replay(ts):
-                    raise
-                a = d0  # a replay cannot be told from a restart before its rate is known
+            # a replay's receive times are not the controller's clock: they say nothing of its
+            # envelope or jitter, which would otherwise be kept in the replay's ticks and read in
+            # the controller's ones if the replay's average rate came near it (one served as
+            # fast as possible that stalled)
+            if d0 == 0:
+                return None
+            self._u += d0
+            self._last_raw, self._ts, self._env = r, ts, ts
+            return self._u
+        try:
+            a = self._advance(d0, ts, Th)
+        except CounterError:
+            if self.modulus == 1 or not self._maybe_replay(ts):
+                raise
+            a = d0  # a replay cannot be told from a restart before its rate is known
         if a == 0:
             return None  # the same value again right away: a repeated frame
         dt = ts - self._ts
