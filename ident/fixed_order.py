@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["dot", "lstsq", "matvec", "moving_mean", "norm", "normal_products", "qr_r", "solve", "solve_upper",
-           "sum_squares", "weighted_rows"]
+           "sum_squares", "unit_columns", "weighted_rows"]
 
 #: Independent partial sums per dot product (combined in a fixed order): four keep the
 #: adder's pipeline busy without making the order depend on the machine.
@@ -215,6 +215,17 @@ def lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     d = np.abs(np.diag(R))
     tol = max(m, n) * np.finfo(float).eps * (float(d.max()) if d.size else 0.0)
     return _back_substitute(np.ascontiguousarray(R), np.ascontiguousarray(Z[:n, n]), tol)
+
+
+def unit_columns(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(A / s, s)``: the columns of A scaled to unit norm (a zero column left as it is), so
+    that least squares on A is conditioned by the columns' directions, not their units (eq.
+    3.12's columns span mm, mm/s and mm/s²).  ``θ = lstsq(A / s, y) / s``.  Each norm is a
+    sum down one column (numpy reduces along the first axis of a C array row by row: one
+    order on every machine)."""
+    s = np.linalg.norm(A, axis=0)
+    s[s == 0] = 1.0
+    return A / s, s
 
 
 @njit(cache=True, nogil=True)

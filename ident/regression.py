@@ -32,7 +32,7 @@ import numpy as np
 
 from core.errors import IdentificationError, InputError
 from ident import preprocessing as pp
-from ident.fixed_order import lstsq, matvec, sum_squares
+from ident.fixed_order import lstsq, matvec, sum_squares, unit_columns
 
 __all__ = ["Regression", "build_regression", "lstsq_scaled", "COLUMNS"]
 
@@ -89,9 +89,8 @@ class Regression:
 
 def lstsq_scaled(Phi: np.ndarray, Y: np.ndarray) -> tuple[np.ndarray, float]:
     """Unconstrained LS of eq. 3.12 with unit-norm column scaling; returns (θ, ½‖Y − Φθ‖²)."""
-    scale = np.linalg.norm(Phi, axis=0)
-    scale[scale == 0] = 1.0
-    theta = lstsq(Phi / scale, Y) / scale
+    Phi_s, scale = unit_columns(Phi)
+    theta = lstsq(Phi_s, Y) / scale
     return theta, 0.5 * sum_squares(Y - matvec(Phi, theta))
 
 

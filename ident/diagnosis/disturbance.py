@@ -34,7 +34,7 @@ import numpy as np
 
 from ident.diagnosis.residuals import (BLOCK_MIN_S, SEGMENT_EDGE_S, excursion_blocks, position_periodogram,
                                        reversal_times, time_since)
-from ident.fixed_order import dot, lstsq, matvec, sum_squares
+from ident.fixed_order import dot, lstsq, matvec, sum_squares, unit_columns
 from ident.portable_math import exp, geomspace
 
 __all__ = ["equivalent_disturbance", "analyse_disturbance", "block_input", "DISTURBANCE_BAND_HZ"]
@@ -151,9 +151,7 @@ def _explained(y: np.ndarray, A: np.ndarray) -> tuple[float, np.ndarray]:
     den = sum_squares(y)
     if den <= 0 or A.size == 0:
         return 0.0, np.zeros_like(y)
-    scale = np.linalg.norm(A, axis=0)
-    scale[scale == 0] = 1.0
-    As = A / scale
+    As = unit_columns(A)[0]
     fit = matvec(As, lstsq(As, y))
     return sum_squares(fit) / den, fit
 
@@ -304,9 +302,8 @@ def _state_blocks(wl: np.ndarray, A: np.ndarray, Ts: float,
 
 def _lstsq(A: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Least-squares coefficients with the columns scaled to unit norm (then unscaled)."""
-    scale = np.linalg.norm(A, axis=0)
-    scale[scale == 0] = 1.0
-    return lstsq(A / scale, y) / scale
+    As, scale = unit_columns(A)
+    return lstsq(As, y) / scale
 
 
 def _block_columns(spans: list[tuple[int, int]], n: int) -> np.ndarray:
