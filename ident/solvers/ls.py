@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 
 from core.errors import IdentificationError, RapidIdentWarning
-from ident.fixed_order import lstsq
+from ident.fixed_order import lstsq, unit_columns
 from ident.model import Bounds, DriveModel
 from ident.solvers.common import SolverResult, check_regression, cost_eq312
 
@@ -52,8 +52,8 @@ def solve_ls(Phi: np.ndarray, Y: np.ndarray, bounds: Bounds | None = None, *,
     """
     t0 = time.perf_counter()
     Phi, Y = check_regression(Phi, Y)
-    D = np.linalg.norm(Phi, axis=0)
-    sv = np.linalg.svd(Phi / D, compute_uv=False)  # reported: the rank and condition number
+    Phi_s, D = unit_columns(Phi)  # no zero column: check_regression refuses one
+    sv = np.linalg.svd(Phi_s, compute_uv=False)  # reported: the rank and condition number
     rank = int(np.sum(sv > max(Phi.shape) * np.finfo(float).eps * sv[0]))
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
     if rank < 8:
@@ -62,7 +62,7 @@ def solve_ls(Phi: np.ndarray, Y: np.ndarray, bounds: Bounds | None = None, *,
     if cond > cond_warn:
         warnings.warn(f"least squares is ill-conditioned: condition number of scaled Phi = {cond:.3g}",
                       RapidIdentWarning, stacklevel=2)
-    theta = lstsq(Phi / D, Y) / D  # in a fixed order: the same θ on any machine
+    theta = lstsq(Phi_s, Y) / D  # in a fixed order: the same θ on any machine
     model = DriveModel.from_theta(theta)
     details: dict = {"singular_values_scaled": sv.tolist()}
     if bounds is not None:
