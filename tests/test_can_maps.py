@@ -99,6 +99,16 @@ def test_a_silence_longer_than_a_wrap_is_resolved_with_the_receive_times():
     assert u(k % 240 + 1, 0.001 * k + 0.0004) == k
 
 
+def test_a_capture_that_opens_on_a_late_frame_is_live_and_numbers_a_silence_by_the_host_clock():
+    # the first frame was held back 8 ms by the sender: measured from it, the stream would run
+    # more than 2 % fast for 400 ticks and be taken for a replay, whose counter is read as it
+    # reads, so a silence of 4 wraps there would lose 960 ticks without a word
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    assert [u(k % 240 + 1, 0.001 * k + (0.008 if k == 0 else 0.0)) for k in range(200)] == list(range(200))
+    k = 199 + 1000
+    assert u(k % 240 + 1, 0.001 * k) == k
+
+
 def test_a_pause_of_a_replay_faster_than_real_time_is_not_read_as_wraps():
     u = CounterUnwrapper(240, first=1, period_s=0.001)
     for k in range(500):  # served 50x faster than the controller's clock

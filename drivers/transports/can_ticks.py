@@ -34,6 +34,7 @@ Other rules:
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 from core.errors import ControllerRestartError, StreamError
@@ -60,6 +61,10 @@ MIN_ALLOWED_LATENESS = 0.5
 JITTER_MEMORY_S = 2.0
 #: how fast the envelope may drift later (s per s), for host and controller clock rates
 ENVELOPE_LEAK = 1e-4
+#: the stream's rate is measured between the least delayed frame of its first this many ticks and
+#: the least delayed of its last this many: a frame can come late, never early, so the earliest
+#: of a few ticks lies on the line frames arrive on when nothing delays them
+RATE_WINDOW_TICKS = 25
 #: ticks before the stream's own rate is known; until then the controller's period is assumed,
 #: a doubt is reported only when the stream so far runs near it, and frames may be as early
 #: as they have been late (the envelope may still be drawn through late first frames)
@@ -97,16 +102,41 @@ class CounterUnwrapper:
     _confirm_until: float = -math.inf  # ticks opened before this host time are unconfirmed
     _window_early: float = MIN_ALLOWED_LATENESS  # how early a frame may be until then, ticks
     _confirmed_u: int = 0  # the last tick before that silence
+    # (counter, host time − counter × period) of the least delayed frame of the first ticks, and
+    # of the last ones as a sliding minimum (increasing offsets, the oldest first)
+    _first_min: tuple[int, float] | None = None
+    _recent_min: deque = field(default_factory=deque)
 
     def host_period(self) -> float:
         """Host seconds per controller tick: the nominal period, or for a stream that does not run
-        at it (within 2 %, measured over the whole capture) the measured one."""
-        span = (self._u or 0) - self._start[1]
-        if span >= ESTABLISH_TICKS:
-            measured = (self._ts - self._start[0]) / span
+        at it (within 2 %, measured over the whole capture) the measured one.
+
+        Measured between the least delayed frame of the first :data:`RATE_WINDOW_TICKS` ticks
+        and that of the last ones, not between the first and the last frame: a capture that
+        opens on a frame a few ms late (held back by the sender) or is at a late frame would
+        otherwise read a live stream as a replay for hundreds of ticks, and number a silence of
+        more than a wrap in them as the counter reads, without a word."""
+        if self._first_min is None or not self._recent_min:
+            return self.period_s
+        (u0, o0), (u1, o1) = self._first_min, self._recent_min[0]
+        span = u1 - u0  # at least ESTABLISH_TICKS − 2 × RATE_WINDOW_TICKS once established
+        if (self._u or 0) - self._start[1] >= ESTABLISH_TICKS and span > 0:
+            measured = self.period_s + (o1 - o0) / span
             if measured > 0 and abs(measured / self.period_s - 1) > RATE_TOLERANCE:
                 return measured
         return self.period_s
+
+    def _note_arrival(self, u: int, ts: float) -> None:
+        """Keep the least delayed frames the rate is measured between (:meth:`host_period`)."""
+        o = ts - u * self.period_s
+        if u - self._start[1] <= RATE_WINDOW_TICKS and (self._first_min is None or o <= self._first_min[1]):
+            self._first_min = (u, o)
+        q = self._recent_min
+        while q and q[-1][1] >= o:
+            q.pop()
+        q.append((u, o))
+        while q[0][0] <= u - RATE_WINDOW_TICKS:
+            q.popleft()
 
     def _replay(self, host_period: float) -> bool:
         """Whether the stream is known not to run at its controller's period: a replay (``agent
@@ -137,6 +167,7 @@ class CounterUnwrapper:
         if self._u is None:
             self._u, self._last_raw, self._ts, self._env = r, r, ts, ts
             self._start = (ts, r)
+            self._note_arrival(r, ts)
             return r
         M = self.modulus
         d0 = (r - self._last_raw) % M
@@ -150,6 +181,7 @@ class CounterUnwrapper:
                 return None
             self._u += d0
             self._last_raw, self._ts, self._env = r, ts, ts
+            self._note_arrival(self._u, ts)
             return self._u
         try:
             a = self._advance(d0, ts, Th)
@@ -172,6 +204,7 @@ class CounterUnwrapper:
         self._slack = max(-off, self._slack * decay)
         self._u += a
         self._last_raw, self._ts, self._env = r, ts, env
+        self._note_arrival(self._u, ts)
         return self._u
 
     def _advance(self, d0: int, ts: float, Th: float) -> int:
