@@ -112,10 +112,10 @@ class CounterUnwrapper:
         at it (within 2 %, measured over the whole capture) the measured one.
 
         Measured between the least delayed frame of the first :data:`RATE_WINDOW_TICKS` ticks
-        and that of the last ones, not between the first and the last frame: a capture that
-        opens on a frame a few ms late (held back by the sender) or is at a late frame would
-        otherwise read a live stream as a replay for hundreds of ticks, and number a silence of
-        more than a wrap in them as the counter reads, without a word."""
+        and that of the last ones, not between the first and the last frame: measured from a
+        first frame a few ms late (held back by the sender), or to a late last frame, a live
+        stream would read as a replay for hundreds of ticks, and a silence of more than a wrap in
+        them would be numbered as the counter reads, without a word."""
         if self._first_min is None or not self._recent_min:
             return self.period_s
         (u0, o0), (u1, o1) = self._first_min, self._recent_min[0]
