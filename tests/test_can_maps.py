@@ -128,6 +128,25 @@ def test_a_replay_whose_average_rate_passes_the_controllers_is_still_numbered_as
     assert got == list(range(2000))
 
 
+def test_a_replay_slower_than_real_time_that_stalls_before_its_rate_is_known_is_numbered_as_it_reads():
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    got, ts = [], 0.0
+    for k in range(300):  # played at 1.5 ms a tick; the player stalls 0.7 s at tick 50, before the
+        ts += 0.7 if k == 50 else 0.0015  # 100 ticks that establish its rate: by the host clock
+        got.append(u(k % 240 + 1, ts))  # that is 720 ticks more, as the counter reads none
+    assert got == list(range(300))
+
+
+def test_a_live_silence_in_the_first_ticks_whose_next_frame_is_late_is_refused_not_read_as_a_replay():
+    # 16 ticks on time, 700 lost, then a frame 1 ms late: later than any frame so far, so the host
+    # clock cannot resolve the wraps; the 16 ticks ran at the controller's pace, so this is no replay
+    # whose counter could be taken as it reads (which would number it 236, 480 ticks short)
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    assert [u(k % 240 + 1, 0.001 * k) for k in range(16)] == list(range(16))
+    with pytest.raises(CounterError, match="cannot tell how many ticks passed"):
+        u(716 % 240 + 1, 0.716 + 0.001)
+
+
 def test_ticks_missing_a_part_are_not_emitted_and_counted_lost():
     asm = TickAssembler(2, 2, CounterUnwrapper(240, 1, 0.001), 0.001)
     out = []

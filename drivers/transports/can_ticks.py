@@ -106,6 +106,8 @@ class CounterUnwrapper:
     # of the last ones as a sliding minimum (increasing offsets, the oldest first)
     _first_min: tuple[int, float] | None = None
     _recent_min: deque = field(default_factory=deque)
+    _early: list = field(default_factory=list)  # (counter, offset) of every tick before ESTABLISH_TICKS
+    _replaying: bool = False  # a frame before ESTABLISH_TICKS was numbered as a replay's
 
     def host_period(self) -> float:
         """Host seconds per controller tick: the nominal period, or for a stream that does not run
@@ -129,6 +131,8 @@ class CounterUnwrapper:
     def _note_arrival(self, u: int, ts: float) -> None:
         """Keep the least delayed frames the rate is measured between (:meth:`host_period`)."""
         o = ts - u * self.period_s
+        if u - self._start[1] < ESTABLISH_TICKS:
+            self._early.append((u, o))
         if u - self._start[1] <= RATE_WINDOW_TICKS and (self._first_min is None or o <= self._first_min[1]):
             self._first_min = (u, o)
         q = self._recent_min
@@ -144,12 +148,33 @@ class CounterUnwrapper:
         controller's clock.  Its counter is taken as it reads."""
         return self.modulus > 1 and host_period != self.period_s
 
-    def _maybe_replay(self, ts: float) -> bool:
-        """Before the rate is established: too few ticks to tell, or arriving > 25 % off the period."""
+    def _maybe_replay(self) -> bool:
+        """Before the rate is established: too few ticks to tell (under 3), a replay's pace so far
+        (:meth:`_early_replay`), or a frame already taken as a replay's (its stall breaks the pace
+        the later frames show)."""
         span = (self._u or 0) - self._start[1]
         if span >= ESTABLISH_TICKS:
             return False
-        return span < 10 or abs((ts - self._start[0]) / span / self.period_s - 1) > 0.25
+        return span < 3 or self._replaying or self._early_replay()
+
+    def _early_replay(self) -> bool:
+        """Before the rate is established: whether the ticks so far run steadily more than 25 %
+        off the controller's period — a replay's pace.  Measured as :meth:`host_period` is, between
+        least delayed frames (so a late first frame does not make a live stream look fast), here
+        those of each third of the ticks so far, and both slopes must say it: a sender that held
+        frames back makes one third late, which reads as a pace between two of them only.  Too
+        few ticks (under 3) show nothing."""
+        span = (self._u or 0) - self._start[1]
+        if self.modulus == 1 or not 3 <= span < ESTABLISH_TICKS:
+            return False
+        u0 = self._start[1]
+        edges = (u0, u0 + span // 3, u0 + 2 * span // 3, u0 + span + 1)
+        least = [min((e for e in self._early if lo <= e[0] < hi), key=lambda e: e[1], default=None)
+                 for lo, hi in zip(edges, edges[1:])]
+        if None in least:
+            return False
+        slopes = [(b[1] - a[1]) / (b[0] - a[0]) / self.period_s for a, b in zip(least, least[1:]) if b[0] > a[0]]
+        return len(slopes) == 2 and (min(slopes) > 0.25 or max(slopes) < -0.25)
 
     @property
     def unconfirmed_until(self) -> float:
@@ -186,9 +211,10 @@ class CounterUnwrapper:
         try:
             a = self._advance(d0, ts, Th)
         except CounterError:
-            if self.modulus == 1 or not self._maybe_replay(ts):
+            if self.modulus == 1 or not self._maybe_replay():
                 raise
             a = d0  # a replay cannot be told from a restart before its rate is known
+            self._replaying = True
         if a == 0:
             return None  # the same value again right away: a repeated frame
         dt = ts - self._ts
@@ -231,6 +257,12 @@ class CounterUnwrapper:
             kind = CounterError if window or M == 1 else ControllerRestart
             raise kind(self._ahead_message(d0, ts, h))
         n = max(0, int((h + EARLY_TICKS - base) // M))
+        if n >= 1 and (self._replaying or self._early_replay()):
+            # a stall of a replay played off the controller's pace: the host clock would count
+            # the stall's time in the controller's ticks, so its counter is taken as it reads
+            # (before the 3rd tick nothing shows a pace: the host clock numbers it)
+            n = 0
+            self._replaying = True
         a = base + n * M
         if n >= 1:
             late = h - a  # how late the frame is behind the envelope if a ticks passed
