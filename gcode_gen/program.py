@@ -48,7 +48,8 @@ class Block:
     feed : float or None
         Path feed in mm/s in effect for the block; None for rapid moves and dwells.
     center : dict[str, float] or None
-        Absolute arc centre in mm (keys ``"X"``, ``"Y"``) for G2/G3; None otherwise.
+        Absolute arc centre in mm (keys: the two axes of ``plane``, ``"X"``, ``"Y"`` for G17) for
+        G2/G3; None otherwise.
     dwell_s : float or None
         Dwell time in s for G4; None otherwise.
     plane : str

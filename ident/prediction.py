@@ -154,7 +154,8 @@ def _per_label(run: CommandedRun, labels: tuple[np.ndarray, np.ndarray], value, 
 
 def _arcs(run: CommandedRun, axes: list[str], labels: tuple[np.ndarray, np.ndarray] | None = None
           ) -> tuple[list, np.ndarray | None, tuple[int, int]]:
-    """Arc geometry per sample (of ``labels``, default the run's own) for :func:`path_contour_error` (XY arcs only)."""
+    """Arc geometry per sample (of ``labels``, default the run's own) for :func:`path_contour_error`: arcs of
+    the XY plane (G17) only; an arc of another plane counts as the path its samples draw."""
     if "X" not in axes or "Y" not in axes:
         return [], None, (0, 1)
     plane = (axes.index("X"), axes.index("Y"))
@@ -162,7 +163,7 @@ def _arcs(run: CommandedRun, axes: list[str], labels: tuple[np.ndarray, np.ndarr
     index: dict[tuple[int, int], int] = {}
     for p, blocks in enumerate(run.blocks):
         for line, b in blocks.items():
-            if b.motion in ("G2", "G3") and b.center and "X" in b.target and "Y" in b.target:
+            if b.motion in ("G2", "G3") and b.plane == "XY" and b.center and "X" in b.target and "Y" in b.target:
                 c = np.array([b.center["X"], b.center["Y"]])
                 r = float(np.hypot(b.target["X"] - c[0], b.target["Y"] - c[1]))
                 index[(p, line)] = len(arcs)

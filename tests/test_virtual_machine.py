@@ -116,6 +116,21 @@ def test_contour_error_of_a_circle_is_its_radial_deviation_not_the_chord():
     np.testing.assert_allclose(e, -0.003, atol=1e-9)  # outside a ccw circle: right of travel
 
 
+def test_an_arc_outside_the_xy_plane_counts_as_the_path_it_draws(pid_result, tmp_path):
+    # LinuxCNC's tort.ngc programs X, Y and Z on G18/G19 arcs, whose centre is in X–Z or Y–Z
+    doc = json.loads(json.dumps(pid_result))
+    doc["axes"]["Z"] = doc["axes"]["Y"]
+    vm = ident.VirtualMachine.from_result(doc, "xyz.json")
+    prog = tmp_path / "planes.ngc"
+    prog.write_text("G21 G90 G17\nG1 X0 Y0 Z0 F600\nG18 G2 X10 Y0 Z0 I5 K0\nG19 G3 X10 Y10 Z0 J5 K0\n"
+                    "G17 G3 X0 Y10 I-5 J0\nM2\n")
+    s = analyse(vm.run([prog]))
+    assert np.isfinite(s.contour[s.feed_move]).all()
+    # the contour error is the distance to the path: never more than the tracking error's length
+    err = np.sqrt(sum(s.prediction.recording.axes[a].tracking_error ** 2 for a in "XYZ"))
+    assert s.contour_max_mm <= err[s.feed_move].max() + 1e-9
+
+
 def test_contour_error_near_the_end_of_a_closed_path_is_measured_on_its_last_side():
     sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], dtype=float)
     P = np.concatenate([np.linspace(sq[i], sq[i + 1], 101)[:-1] for i in range(4)] + [sq[-1:]])
