@@ -91,10 +91,22 @@ class BallbarRun:
 
 
 def check_test_size(radius: float, feed: float) -> None:
-    """Refuse a test radius or feed that is not positive, naming the one that is not."""
+    """Refuse a test radius or feed that is not positive, naming the one that is not, and a
+    feed too fast for the radius: the axes reverse every quarter turn, and a reversal's
+    windows (its spike, then the step read after it, :func:`_analyse_run`) must end before
+    the next reversal's begin, else nothing is left to fit the baseline between them and
+    every figure would be read from reversal transients."""
     for name, value, unit in (("radius", radius, "mm"), ("feed", feed, "mm/s")):
         if not value > 0:
             raise InputError.about(name, f"{name} must be > 0 {unit}, got {value:g}")
+    # arc w of SPIKE_TIME: the windows span 3w + max(STEP_ARC, w) of the quarter turn
+    w = feed * SPIKE_TIME / radius
+    if 3 * w + max(STEP_ARC, w) > 0.5 * np.pi:
+        quarter_ms = 1e3 * 0.5 * np.pi * radius / feed
+        raise InputError.about("feed", f"feed {feed:g} mm/s on radius {radius:g} mm: a quarter turn takes "
+                                       f"{quarter_ms:.0f} ms, and a reversal's spike and step are read over "
+                                       f"{4e3 * SPIKE_TIME:.0f} ms; give a feed of at most "
+                                       f"{np.pi * radius / (8 * SPIKE_TIME):.3g} mm/s on this radius")
 
 
 def ballbar_run(x: np.ndarray, y: np.ndarray, *, centre: tuple[float, float], radius: float,

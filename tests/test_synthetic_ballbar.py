@@ -87,6 +87,11 @@ def test_agent_ballbar_prints_the_reading_and_writes_a_self_contained_report(tmp
                                 ("--feed", "0", "error: --feed must be > 0 mm/s, got 0")):
         bad = CliRunner().invoke(cli.app, ["ballbar", "--machine", str(result), option, value])
         assert bad.exit_code == 2 and bad.output.strip() == told  # the one option that is wrong, alone
+    # a feed whose quarter turns are shorter than a reversal's windows: no baseline is left
+    # between the reversals to read the circle from (before, servo mismatch read 0.00 ms)
+    bad = CliRunner().invoke(cli.app, ["ballbar", "--machine", str(result), "--radius", "0.5", "--feed", "10"])
+    assert bad.exit_code == 2 and bad.output.startswith("error: --feed 10 mm/s on radius 0.5 mm: a quarter turn")
+    assert "at most 4.91 mm/s" in bad.output and len(bad.output.strip().splitlines()) == 1
 
 
 def test_generated_ballbar_programs_recorded_on_the_drives_overlay_the_prediction(tmp_path, mismatched):
