@@ -147,6 +147,17 @@ def test_a_live_silence_in_the_first_ticks_whose_next_frame_is_late_is_refused_n
         u(716 % 240 + 1, 0.716 + 0.001)
 
 
+@pytest.mark.parametrize("silence_at", [10, 300])
+def test_a_live_capture_whose_first_frames_came_in_a_burst_numbers_a_later_silence_by_the_host_clock(silence_at):
+    # the sender held its first frames back 10 ms and sent them together (one of them lost): for
+    # its first ticks the stream runs "fast", as a replay would; a silence of 700 ticks after is
+    # still numbered by the host clock, before and after the stream's rate is established
+    u = CounterUnwrapper(240, first=1, period_s=0.001)
+    ticks = [k for k in range(silence_at + 800) if k != 1 and not silence_at <= k < silence_at + 700]
+    got = [u(k % 240 + 1, 0.010 + 1e-5 * k if k < 6 else 0.001 * k) for k in ticks]
+    assert got == ticks
+
+
 def test_ticks_missing_a_part_are_not_emitted_and_counted_lost():
     asm = TickAssembler(2, 2, CounterUnwrapper(240, 1, 0.001), 0.001)
     out = []

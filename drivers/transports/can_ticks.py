@@ -148,33 +148,37 @@ class CounterUnwrapper:
         controller's clock.  Its counter is taken as it reads."""
         return self.modulus > 1 and host_period != self.period_s
 
-    def _maybe_replay(self) -> bool:
-        """Before the rate is established: too few ticks to tell (under 3), a replay's pace so far
-        (:meth:`_early_replay`), or a frame already taken as a replay's (its stall breaks the pace
-        the later frames show)."""
-        span = (self._u or 0) - self._start[1]
-        if span >= ESTABLISH_TICKS:
+    def _young_replay(self) -> bool:
+        """Before the rate is established: a frame already taken as a replay's on this evidence
+        (its stall breaks the pace later frames show), or a replay's pace so far
+        (:meth:`_early_pace`).  Until the 3rd tick nothing shows a pace: a frame the host clock
+        cannot number is then taken as it reads, but the stream is not called a replay for it.  After,
+        :meth:`host_period` alone decides: a live stream whose first frames came in a burst was
+        taken for a replay there, and is not one."""
+        if (self._u or 0) - self._start[1] >= ESTABLISH_TICKS:
             return False
-        return span < 3 or self._replaying or self._early_replay()
+        return self._replaying or self._early_pace() != 0
 
-    def _early_replay(self) -> bool:
-        """Before the rate is established: whether the ticks so far run steadily more than 25 %
-        off the controller's period — a replay's pace.  Measured as :meth:`host_period` is, between
+    def _early_pace(self) -> int:
+        """Before the rate is established: +1 (slower) or −1 (faster) when the ticks so far run
+        steadily more than 25 % off the controller's period — a replay's pace — else 0.  Measured as :meth:`host_period` is, between
         least delayed frames (so a late first frame does not make a live stream look fast), here
         those of each third of the ticks so far, and both slopes must say it: a sender that held
         frames back makes one third late, which reads as a pace between two of them only.  Too
         few ticks (under 3) show nothing."""
         span = (self._u or 0) - self._start[1]
         if self.modulus == 1 or not 3 <= span < ESTABLISH_TICKS:
-            return False
+            return 0
         u0 = self._start[1]
         edges = (u0, u0 + span // 3, u0 + 2 * span // 3, u0 + span + 1)
         least = [min((e for e in self._early if lo <= e[0] < hi), key=lambda e: e[1], default=None)
                  for lo, hi in zip(edges, edges[1:])]
         if None in least:
-            return False
+            return 0
         slopes = [(b[1] - a[1]) / (b[0] - a[0]) / self.period_s for a, b in zip(least, least[1:]) if b[0] > a[0]]
-        return len(slopes) == 2 and (min(slopes) > 0.25 or max(slopes) < -0.25)
+        if len(slopes) < 2:
+            return 0
+        return 1 if min(slopes) > 0.25 else -1 if max(slopes) < -0.25 else 0
 
     @property
     def unconfirmed_until(self) -> float:
@@ -211,10 +215,11 @@ class CounterUnwrapper:
         try:
             a = self._advance(d0, ts, Th)
         except CounterError:
-            if self.modulus == 1 or not self._maybe_replay():
+            paced = self.modulus > 1 and self._young_replay()
+            if self.modulus == 1 or not (paced or (self._u or 0) - self._start[1] < 3):
                 raise
-            a = d0  # a replay cannot be told from a restart before its rate is known
-            self._replaying = True
+            a = d0  # before its rate is known a replay cannot be told from a restart: as it reads
+            self._replaying = paced  # kept only on a replay's evidence, not for the first ticks' doubt
         if a == 0:
             return None  # the same value again right away: a repeated frame
         dt = ts - self._ts
@@ -257,12 +262,12 @@ class CounterUnwrapper:
             kind = CounterError if window or M == 1 else ControllerRestart
             raise kind(self._ahead_message(d0, ts, h))
         n = max(0, int((h + EARLY_TICKS - base) // M))
-        if n >= 1 and (self._replaying or self._early_replay()):
-            # a stall of a replay played off the controller's pace: the host clock would count
-            # the stall's time in the controller's ticks, so its counter is taken as it reads
-            # (before the 3rd tick nothing shows a pace: the host clock numbers it)
+        if n >= 1 and (self._u or 0) - self._start[1] < ESTABLISH_TICKS and self._early_pace() > 0:
+            # a stall of a replay played slower than the controller: the host clock would count the
+            # stall's time in the controller's ticks, so its counter is taken as it reads.  (Only
+            # slower: a live stream whose first frames came in a burst looks fast for a while, and
+            # a fast replay's stall is numbered right by the host clock.)
             n = 0
-            self._replaying = True
         a = base + n * M
         if n >= 1:
             late = h - a  # how late the frame is behind the envelope if a ticks passed
