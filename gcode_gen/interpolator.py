@@ -169,16 +169,19 @@ def plan_profile(L: float, v: float, a: float, j: float | None = None) -> Profil
 
 def _s_acc(t: np.ndarray, Tj: np.ndarray, Tk: np.ndarray, ap: np.ndarray, j: np.ndarray) -> np.ndarray:
     """Distance covered in the acceleration phase after time t (0 <= t <= Ta), vectorised."""
-    v1 = 0.5 * j * Tj * Tj
-    S1 = j * Tj**3 / 6.0
-    v2 = v1 + ap * Tk
-    S2 = S1 + v1 * Tk + 0.5 * ap * Tk * Tk
-    t2 = t - Tj
-    t3 = t - Tj - Tk
-    s1 = j * t**3 / 6.0
-    s2 = S1 + v1 * t2 + 0.5 * ap * t2 * t2
-    s3 = S2 + v2 * t3 + 0.5 * ap * t3 * t3 - j * t3**3 / 6.0
-    return np.where(t < Tj, s1, np.where(t < Tj + Tk, s2, s3))
+    # A move of an axis without limits (one the INI does not list) has ap = ∞ over Tk = 0: the
+    # phases it never enters read ∞·0, and np.where takes the phase each sample is in.
+    with np.errstate(invalid="ignore"):
+        v1 = 0.5 * j * Tj * Tj
+        S1 = j * Tj**3 / 6.0
+        v2 = v1 + ap * Tk
+        S2 = S1 + v1 * Tk + 0.5 * ap * Tk * Tk
+        t2 = t - Tj
+        t3 = t - Tj - Tk
+        s1 = j * t**3 / 6.0
+        s2 = S1 + v1 * t2 + 0.5 * ap * t2 * t2
+        s3 = S2 + v2 * t3 + 0.5 * ap * t3 * t3 - j * t3**3 / 6.0
+        return np.where(t < Tj, s1, np.where(t < Tj + Tk, s2, s3))
 
 
 def _evaluate(tau: np.ndarray, p: dict[str, np.ndarray]) -> np.ndarray:

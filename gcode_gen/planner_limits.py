@@ -10,13 +10,13 @@ carries those figures and where they came from, for :func:`gcode_gen.interpolato
 
 from __future__ import annotations
 
-import configparser
 import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from core.errors import InputError
+from gcode_gen.linuxcnc_ini import linear_units_mm, read_sections
 
 __all__ = ["PlannerLimits", "read_linuxcnc_ini"]
 
@@ -40,47 +40,50 @@ class PlannerLimits:
                 "axes": {a: {"max_velocity_mm_s": v, "max_acceleration_mm_s2": acc} for a, (v, acc) in self.axes.items()}}
 
 
-def _number(cp: configparser.ConfigParser, section: str, key: str, path: Path) -> float | None:
-    if not cp.has_option(section, key):
+def _number(secs: dict, section: str, key: str, path: Path) -> float | None:
+    if key not in secs.get(section, {}):
         return None
-    text = cp.get(section, key).split("#")[0].strip()
+    line, value = secs[section][key]
+    text = value.split("#")[0].strip()
     try:
-        value = float(text)
+        number = float(text)
     except ValueError:
-        raise InputError(f"{path}: [{section}] {key} = {text!r} is not a number") from None
-    if not (math.isfinite(value) and value > 0):
-        raise InputError(f"{path}: [{section}] {key} = {text} must be a positive number")
-    return value
+        raise InputError(f"{path}:{line + 1}: [{section}] {key} = {text!r} is not a number") from None
+    if not (math.isfinite(number) and number > 0):
+        raise InputError(f"{path}:{line + 1}: [{section}] {key} = {text} must be a positive number")
+    return number
 
 
 def read_linuxcnc_ini(path: str | Path) -> PlannerLimits:
-    """The planner limits of a LinuxCNC INI file (module docstring); one line naming what is missing."""
+    """The planner limits of a LinuxCNC INI file (module docstring), in mm; one line naming what is missing.
+
+    Read as LinuxCNC reads it (:mod:`gcode_gen.linuxcnc_ini`: ``#INCLUDE`` expanded, indented
+    keys, the first of equal keys); velocities and accelerations are in the machine's units,
+    ``[TRAJ] LINEAR_UNITS``, and converted to mm (an inch machine's 4 in/s is 101.6 mm/s).
+    Line numbers in messages are those of the INI with its includes expanded.
+    """
     path = Path(path)
-    cp = configparser.ConfigParser(strict=False, interpolation=None, comment_prefixes=("#", ";"),
-                                   inline_comment_prefixes=None)
-    cp.optionxform = str
-    try:
-        if not cp.read(path):
-            raise InputError(f"{path}: no such INI file")
-    except (configparser.Error, UnicodeDecodeError) as exc:
-        raise InputError(f"{path}: not a LinuxCNC INI file ({str(exc).splitlines()[0]})") from None
+    secs = read_sections(path)
+    mm = linear_units_mm(secs, path)
     coords = ""
-    if cp.has_option("TRAJ", "COORDINATES"):
-        coords = cp.get("TRAJ", "COORDINATES")
-    elif cp.has_option("KINS", "KINEMATICS") and "coordinates=" in cp.get("KINS", "KINEMATICS"):
-        coords = cp.get("KINS", "KINEMATICS").split("coordinates=")[1].split()[0]
-    letters = [c.upper() for c in coords if c.isalpha()]
+    if "COORDINATES" in secs.get("TRAJ", {}):
+        coords = secs["TRAJ"]["COORDINATES"][1]
+    elif "coordinates=" in secs.get("KINS", {}).get("KINEMATICS", (0, ""))[1]:
+        coords = secs["KINS"]["KINEMATICS"][1].split("coordinates=")[1].split()[0]
+    letters = [c.upper() for c in coords.split("#")[0] if c.isalpha()]
     if not letters:
         raise InputError(f"{path}: no [TRAJ] COORDINATES (or [KINS] KINEMATICS coordinates=): which axes?")
     axes: dict[str, tuple[float, float]] = {}
     for j, letter in enumerate(letters):
         found = []  # a gantry's second joint (the letter again) limits the axis too
         for section in (f"AXIS_{letter}", f"JOINT_{j}"):
-            found.append((_number(cp, section, "MAX_VELOCITY", path), _number(cp, section, "MAX_ACCELERATION", path)))
+            found.append((_number(secs, section, "MAX_VELOCITY", path), _number(secs, section, "MAX_ACCELERATION", path)))
         v = [x for x, _ in found if x is not None]
         a = [x for _, x in found if x is not None]
         if not v or not a:
             raise InputError(f"{path}: axis {letter} has no MAX_VELOCITY/MAX_ACCELERATION in [AXIS_{letter}] or [JOINT_{j}]")
         old = axes.get(letter, (math.inf, math.inf))
-        axes[letter] = (min(min(v), old[0]), min(min(a), old[1]))
-    return PlannerLimits(axes, _number(cp, "TRAJ", "MAX_LINEAR_VELOCITY", path), path.name)
+        k = 1.0 if letter in "ABC" else mm  # a rotary axis is in ANGULAR_UNITS
+        axes[letter] = (min(k * min(v), old[0]), min(k * min(a), old[1]))
+    cap = _number(secs, "TRAJ", "MAX_LINEAR_VELOCITY", path)
+    return PlannerLimits(axes, None if cap is None else mm * cap, path.name)

@@ -83,6 +83,32 @@ def test_an_ini_without_limits_is_one_line(tmp_path):
 
 
 
+def test_an_inch_machines_limits_are_read_in_mm(tmp_path):
+    # LinuxCNC's own sim/axis/axis.ini is an inch machine: MAX_VELOCITY = 4 is 4 in/s
+    ini = tmp_path / "inch.ini"
+    ini.write_text("[TRAJ]\nCOORDINATES = X Y\nLINEAR_UNITS = inch\nMAX_LINEAR_VELOCITY = 5\n"
+                   "[AXIS_X]\nMAX_VELOCITY = 4\nMAX_ACCELERATION = 100\n"
+                   "[AXIS_Y]\nMAX_VELOCITY = 4\nMAX_ACCELERATION = 50\n")
+    lim = read_linuxcnc_ini(ini)
+    assert lim.axes == {"X": (pytest.approx(101.6), pytest.approx(2540.0)),
+                        "Y": (pytest.approx(101.6), pytest.approx(1270.0))}
+    assert lim.max_linear_velocity == pytest.approx(127.0)
+    ini.write_text(ini.read_text().replace("LINEAR_UNITS = inch", "LINEAR_UNITS = furlong"))
+    with pytest.raises(InputError, match="LINEAR_UNITS = .furlong.: LinuxCNC knows mm, metric, in, inch, imperial or a number"):
+        read_linuxcnc_ini(ini)
+
+
+def test_an_ini_is_read_as_linuxcnc_reads_it_includes_indented_keys_and_the_first_of_two(tmp_path):
+    # LinuxCNC's sample configs indent keys to align them, and pull sections in with #INCLUDE
+    (tmp_path / "axes.inc").write_text("[AXIS_X]\n    MAX_VELOCITY =  20\nMAX_ACCELERATION =  300\n"
+                                       "MAX_VELOCITY = 99\n")
+    ini = tmp_path / "m.ini"
+    # (a missing include is skipped, as LinuxCNC's start script skips it after saying so)
+    ini.write_text("#INCLUDE axes.inc\n#INCLUDE nosuchfile\n[TRAJ]\n  COORDINATES = X\n# a comment\n; another\n")
+    lim = read_linuxcnc_ini(ini)
+    assert lim.axes == {"X": (20.0, 300.0)} and lim.max_linear_velocity is None
+
+
 @pytest.fixture(scope="module")
 def result_json(tmp_path_factory):
     import ident

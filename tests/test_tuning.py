@@ -16,6 +16,7 @@ import pytest
 import gcode_gen
 import ident
 import virtual_cnc
+from core.errors import InputError
 from gcode_gen.toolpaths import circle
 from ident.synthetic_ballbar import ballbar_of_recording
 from ident.tuning import Gains, Criterion, TuningRefused, derive_plant, tune
@@ -158,6 +159,15 @@ def test_ini_gains_and_diff_lines_exact(tmp_path):
         f"@@ -{at['FF2']} +{at['FF2']} @@", "-FF2 = 0.0", "+FF2 = 0.001",
         f"@@ -{last},0 +{last + 1} @@", "+BACKLASH = 0.02",
     ]
+
+
+def test_the_gains_of_an_inch_machine_are_refused_not_read_as_per_mm(tmp_path):
+    # an inch machine's P is per inch: read as per mm it would be 25.4 times too stiff
+    ini = tmp_path / "machine.ini"
+    text = (ROOT / "fixtures/linuxcnc/machine.ini").read_text()
+    ini.write_text(text.replace("\n[TRAJ]\n", "\n[TRAJ]\nLINEAR_UNITS = inch\n", 1))  # the first of two counts
+    with pytest.raises(InputError, match="LINEAR_UNITS = inch: the tuner reads and writes pid gains of a machine in mm only"):
+        read_joint_gains(ini, ["X"])
 
 
 def _tuned_machine(machine, gains):

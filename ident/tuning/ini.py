@@ -11,34 +11,14 @@ from __future__ import annotations
 
 import difflib
 import math
-import re
 from pathlib import Path
 from typing import Mapping
 
 from core.errors import InputError
+from gcode_gen.linuxcnc_ini import KEY_LINE, linear_units_mm, sections
 from ident.tuning.controllers import GAIN_NAMES, Gains
 
 __all__ = ["read_joint_gains", "ini_diff", "format_value"]
-
-_SECTION = re.compile(r"^\s*\[([^\]]+)\]\s*$")
-_KEY = re.compile(r"^(\s*)([A-Za-z0-9_]+)(\s*=\s*)(.*?)\s*$")
-
-
-def _sections(lines: list[str]) -> dict[str, dict[str, tuple[int, str]]]:
-    out: dict[str, dict[str, tuple[int, str]]] = {}
-    cur = None
-    for i, line in enumerate(lines):
-        m = _SECTION.match(line)
-        if m:
-            cur = out.setdefault(m.group(1).strip(), {})
-            continue
-        if cur is None or line.lstrip().startswith(("#", ";")):
-            continue
-        k = _KEY.match(line)
-        if k:
-            cur.setdefault(k.group(2), (i, k.group(4)))
-    return out
-
 
 def read_joint_gains(path: str | Path, axes: list[str]) -> dict[str, tuple[int, Gains]]:
     """{axis: (joint number, Gains("linuxcnc-pid"))} for the ``axes`` of a result, from the INI."""
@@ -47,7 +27,11 @@ def read_joint_gains(path: str | Path, axes: list[str]) -> dict[str, tuple[int, 
         lines = path.read_text().splitlines()
     except OSError as exc:
         raise InputError.about("ini", f"{path}: cannot read ({exc.strerror or exc})") from None
-    secs = _sections(lines)
+    secs = sections(lines)
+    if linear_units_mm(secs, path) != 1.0:
+        # the pid's gains are per machine unit, the models' per mm: converted both ways or not at all
+        raise InputError.about("ini", f"{path}: [TRAJ] LINEAR_UNITS = {secs['TRAJ']['LINEAR_UNITS'][1]}: the tuner "
+                                      f"reads and writes pid gains of a machine in mm only")
     coords = (secs.get("TRAJ", {}).get("COORDINATES", (0, ""))[1]).replace(" ", "").upper()
     if not coords:
         raise InputError.about("ini", f"{path}: no [TRAJ]COORDINATES: which joint drives which axis?")
@@ -90,7 +74,7 @@ def ini_diff(path: str | Path, changes: Mapping[int, Mapping[str, float]]) -> li
     path = Path(path)
     lines = path.read_text().splitlines()
     new = list(lines)
-    secs = _sections(lines)
+    secs = sections(lines)
     inserts: dict[int, list[str]] = {}
     for j, kv in sorted(changes.items()):
         sec = secs.get(f"JOINT_{j}", {})
@@ -98,7 +82,7 @@ def ini_diff(path: str | Path, changes: Mapping[int, Mapping[str, float]]) -> li
         for k, v in kv.items():
             if k in sec:
                 i = sec[k][0]
-                m = _KEY.match(lines[i])
+                m = KEY_LINE.match(lines[i])
                 new[i] = f"{m.group(1)}{k}{m.group(3)}{format_value(v)}"
             elif last is not None:
                 inserts.setdefault(last, []).append(f"{k} = {format_value(v)}")
