@@ -36,8 +36,8 @@ def _figures(summaries: Sequence[PredictionSummary]) -> str:
     header = ("figure",) + tuple(s.machine for s in summaries)
     rows = []
     if any(s.contour is not None for s in summaries):
-        rows.append(("max contour error",) + tuple(_um(s.contour_max_mm) for s in summaries))
-        rows.append(("rms contour error",) + tuple(_um(s.contour_rms_mm) for s in summaries))
+        rows.append(("max contour error (feed moves)",) + tuple(_um(s.contour_max_mm) for s in summaries))
+        rows.append(("rms contour error (feed moves)",) + tuple(_um(s.contour_rms_mm) for s in summaries))
 
         def where(s: PredictionSummary) -> str:
             if not s.worst:
@@ -49,10 +49,10 @@ def _figures(summaries: Sequence[PredictionSummary]) -> str:
 
         rows.append(("where the contour error is largest",) + tuple(where(s) for s in summaries))
     for axis in dict.fromkeys(a for s in summaries for a in s.tracking):
-        rows.append((f"{axis} max tracking error",) + tuple(
+        rows.append((f"{axis} max tracking error (feed moves)",) + tuple(
             (f"{_um(s.tracking[axis].max_abs_mm)} ({s.tracking[axis].program} line {s.tracking[axis].line})"
              if axis in s.tracking else "n/a") for s in summaries))
-        rows.append((f"{axis} rms tracking error",) + tuple(
+        rows.append((f"{axis} rms tracking error (feed moves)",) + tuple(
             _um(s.tracking[axis].rms_mm) if axis in s.tracking else "n/a" for s in summaries))
     return table(rows, header)
 
@@ -108,7 +108,7 @@ def _time_plot(summaries: Sequence[PredictionSummary]) -> str:
             if s.contour is not None:
                 rec = s.prediction.recording
                 k = slice(None, None, _step(rec.n_samples))
-                axs[0, 0].plot(rec.t[k], s.contour[k] * 1e3, color=f"C{i}", lw=0.8, label=s.machine)
+                _feed_and_other(axs[0, 0], rec.t[k], s.contour[k] * 1e3, s.feed_move[k], f"C{i}", s.machine)
         axs[0, 0].set_ylabel("contour error (µm)")
         axs[0, 0].legend(fontsize=8)
         row = 1
@@ -117,11 +117,19 @@ def _time_plot(summaries: Sequence[PredictionSummary]) -> str:
             rec = s.prediction.recording
             if axis in rec.axes:
                 k = slice(None, None, _step(rec.n_samples))
-                axs[row + j, 0].plot(rec.t[k], rec.axes[axis].tracking_error[k] * 1e3, color=f"C{i}", lw=0.8)
+                _feed_and_other(axs[row + j, 0], rec.t[k], rec.axes[axis].tracking_error[k] * 1e3,
+                                s.feed_move[k], f"C{i}")
         axs[row + j, 0].set_ylabel(f"{axis} tracking\nerror (µm)")
     axs[-1, 0].set_xlabel("time (s)")
     return png(fig, "Predicted " + ("contour error and " if with_contour else "") + "tracking error of axes "
-                    + ", ".join(axes) + " against time, one colour per machine.")
+                    + ", ".join(axes) + " against time, one colour per machine; in grey the rapids and dwells, "
+                    "which the figures above do not count (they are taken over the feed moves, G1/G2/G3).")
+
+
+def _feed_and_other(ax, t: np.ndarray, y: np.ndarray, feed: np.ndarray, color: str, label: str | None = None) -> None:
+    """``y`` against ``t``: the feed-move samples in ``color``, the others (rapids, dwells) in grey."""
+    ax.plot(t, y, color="0.75", lw=0.6)
+    ax.plot(t, np.where(feed, y, np.nan), color=color, lw=0.8, label=label)
 
 
 def _comparison(c: Comparison) -> str:
