@@ -152,20 +152,21 @@ class CounterUnwrapper:
         """Before the rate is established: a frame already taken as a replay's on this evidence
         (its stall breaks the pace later frames show), or a replay's pace so far
         (:meth:`_early_pace`).  Until the 3rd tick nothing shows a pace: a frame the host clock
-        cannot number is then taken as it reads, but the stream is not called a replay for it.  After,
-        :meth:`host_period` alone decides: a live stream whose first frames came in a burst was
-        taken for a replay there, and is not one."""
+        cannot number is then taken as it reads, but the stream is not called a replay for it.
+        After, :meth:`host_period` alone decides: a live stream whose first frames came in a
+        burst was taken for a replay there, and is not one."""
         if (self._u or 0) - self._start[1] >= ESTABLISH_TICKS:
             return False
         return self._replaying or self._early_pace() != 0
 
     def _early_pace(self) -> int:
         """Before the rate is established: +1 (slower) or −1 (faster) when the ticks so far run
-        steadily more than 25 % off the controller's period — a replay's pace — else 0.  Measured as :meth:`host_period` is, between
-        least delayed frames (so a late first frame does not make a live stream look fast), here
-        those of each third of the ticks so far, and both slopes must say it: a sender that held
-        frames back makes one third late, which reads as a pace between two of them only.  Too
-        few ticks (under 3) show nothing."""
+        steadily more than 25 % off the controller's period — a replay's pace — else 0.
+
+        Measured as :meth:`host_period` is, between least delayed frames (so a late first frame
+        does not make a live stream look fast), here those of each third of the ticks so far,
+        and both slopes must say it: a sender that held frames back makes one third late, which
+        reads as a pace between two of them only.  Too few ticks (under 3) show nothing."""
         span = (self._u or 0) - self._start[1]
         if self.modulus == 1 or not 3 <= span < ESTABLISH_TICKS:
             return 0
