@@ -99,14 +99,20 @@ def check_test_size(radius: float, feed: float) -> None:
     for name, value, unit in (("radius", radius, "mm"), ("feed", feed, "mm/s")):
         if not value > 0:
             raise InputError.about(name, f"{name} must be > 0 {unit}, got {value:g}")
-    # arc w of SPIKE_TIME: the windows span 3w + max(STEP_ARC, w) of the quarter turn
-    w = feed * SPIKE_TIME / radius
-    if 3 * w + max(STEP_ARC, w) > 0.5 * np.pi:
+    w, wm = _reversal_arcs(feed, radius)
+    if 3 * w + wm > 0.5 * np.pi:  # the spike zone [−w, 2w], then the step's window wm
         quarter_ms = 1e3 * 0.5 * np.pi * radius / feed
         raise InputError.about("feed", f"feed {feed:g} mm/s on radius {radius:g} mm: a quarter turn takes "
                                        f"{quarter_ms:.0f} ms, and a reversal's spike and step are read over "
                                        f"{4e3 * SPIKE_TIME:.0f} ms; give a feed of at most "
                                        f"{np.pi * radius / (8 * SPIKE_TIME):.3g} mm/s on this radius")
+
+
+def _reversal_arcs(feed: float, radius: float) -> tuple[float, float]:
+    """(w, wm), rad: the arc travelled in SPIKE_TIME at ``feed`` on ``radius``, and the width of
+    the windows a reversal's step is read over on either side of its spike zone."""
+    w = feed * SPIKE_TIME / radius
+    return w, max(STEP_ARC, w)
 
 
 def ballbar_run(x: np.ndarray, y: np.ndarray, *, centre: tuple[float, float], radius: float,
@@ -311,8 +317,7 @@ _REVERSALS = ((0, 0.0), (0, np.pi), (1, 0.5 * np.pi), (1, 1.5 * np.pi))
 
 def _analyse_run(run: BallbarRun, axes: tuple[str, str]):
     s, th, dr, used = run.sense, run.theta, run.dr, run.used
-    w = run.feed * SPIKE_TIME / run.radius            # spike window, rad
-    wm = max(STEP_ARC, w)
+    w, wm = _reversal_arcs(run.feed, run.radius)      # spike window, step windows, rad
     # d: signed arc from each reversal in the direction of travel, rad.
     d = [s * (np.mod(th - a + np.pi, 2 * np.pi) - np.pi) for _, a in _REVERSALS]
     zone = np.any([(di >= -w) & (di <= 2 * w) for di in d], axis=0)

@@ -81,8 +81,6 @@ def test_an_ini_without_limits_is_one_line(tmp_path):
         read_linuxcnc_ini(tmp_path / "missing.ini")
 
 
-
-
 def test_an_inch_machines_limits_are_read_in_mm(tmp_path):
     # LinuxCNC's own sim/axis/axis.ini is an inch machine: MAX_VELOCITY = 4 is 4 in/s
     ini = tmp_path / "inch.ini"

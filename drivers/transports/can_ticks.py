@@ -216,8 +216,10 @@ class CounterUnwrapper:
         try:
             a = self._advance(d0, ts, Th)
         except CounterError:
-            paced = self.modulus > 1 and self._young_replay()
-            if self.modulus == 1 or not (paced or (self._u or 0) - self._start[1] < 3):
+            if self.modulus == 1:
+                raise
+            paced = self._young_replay()
+            if not (paced or (self._u or 0) - self._start[1] < 3):
                 raise
             a = d0  # before its rate is known a replay cannot be told from a restart: as it reads
             self._replaying = paced  # kept only on a replay's evidence, not for the first ticks' doubt
@@ -263,7 +265,7 @@ class CounterUnwrapper:
             kind = CounterError if window or M == 1 else ControllerRestart
             raise kind(self._ahead_message(d0, ts, h))
         n = max(0, int((h + EARLY_TICKS - base) // M))
-        if n >= 1 and (self._u or 0) - self._start[1] < ESTABLISH_TICKS and self._early_pace() > 0:
+        if n >= 1 and self._early_pace() > 0:  # (0 once the rate is established)
             # a stall of a replay played slower than the controller: the host clock would count the
             # stall's time in the controller's ticks, so its counter is taken as it reads.  (Only
             # slower: a live stream whose first frames came in a burst looks fast for a while, and
