@@ -90,11 +90,23 @@ class ClockCheck:
 
     The reference is the last sample of the first batch, when it arrived: a buffered
     transport (a Modbus trace ring, a serial stream joined before its info frame) hands
-    its backlog over in that batch, after which samples arrive as they are made.  From
-    then on, for the newest sample, ratio = (c - c_ref) x T / (host time - host time of
-    the reference); once :data:`CLOCK_WINDOW_S` of host time has passed, a ratio outside
-    ``expected / CLOCK_TOLERANCE .. expected x CLOCK_TOLERANCE`` is an error when the two
-    clocks also differ by :data:`CLOCK_SLACK_S` or more.
+    its backlog over in that batch, after which samples arrive as they are made.
+
+    A sample can arrive late (a stalled controller, network or capture process hands a
+    batch over after the pause) but never early, so each arrival's delay is read against
+    the controller's clock: offset = host time - (c - c_ref) x T / expected.  A clock that
+    runs at the wrong rate makes the offset drift steadily; a stall raises it for the
+    arrivals of one moment only.  So, as :class:`drivers.transports.can_ticks.CounterUnwrapper`
+    reads a replay's pace, the clocks are compared between the least delayed arrival of
+    each third of the host time since the reference, and both steps must say the same:
+    outside ``expected / CLOCK_TOLERANCE .. expected x CLOCK_TOLERANCE``, on the same
+    side.  The error also needs :data:`CLOCK_WINDOW_S` of host time since the reference
+    and the clocks to differ by :data:`CLOCK_SLACK_S` or more between the first and last
+    of those arrivals; a third without an arrival judges nothing.
+
+    The least delayed arrival is kept per bin of host time (:data:`_BINS` bins at most;
+    their width doubles when the capture outgrows them), so a check costs the same at
+    any length of capture.
 
     Parameters
     ----------
@@ -104,11 +116,34 @@ class ClockCheck:
     hint : where the period and the counter's word order are set (the driver's words).
     """
 
+    _BINS = 96
+
     def __init__(self, sample_period: float, expected: float = 1.0, hint: str = "") -> None:
         self.T = sample_period
         self.expected = expected
         self.hint = hint
         self._ref: tuple[int, float] | None = None
+        self._width = CLOCK_WINDOW_S / 32  # host s per bin
+        self._least: dict[int, tuple[float, int, float]] = {}  # bin -> (offset, counter, host s)
+
+    def _offset(self, counter: int, host_s: float) -> float:
+        c0, h0 = self._ref  # type: ignore[misc]
+        return (host_s - h0) - (counter - c0) * self.T / self.expected
+
+    def _keep(self, counter: int, host_s: float) -> None:
+        """Keep the arrival if it is the least delayed of its bin; halve the bins when too many."""
+        h0 = self._ref[1]  # type: ignore[index]
+        while (host_s - h0) / self._width >= self._BINS:
+            self._width *= 2
+            merged: dict[int, tuple[float, int, float]] = {}
+            for b, e in self._least.items():
+                if b // 2 not in merged or e < merged[b // 2]:
+                    merged[b // 2] = e
+            self._least = merged
+        b = int((host_s - h0) / self._width)
+        e = (self._offset(counter, host_s), counter, host_s)
+        if b not in self._least or e < self._least[b]:
+            self._least[b] = e
 
     def check(self, counter: int, host_s: float) -> str | None:
         """The error for the newest sample ``counter`` having arrived at host time ``host_s`` (s,
@@ -117,18 +152,32 @@ class ClockCheck:
             return None
         if self._ref is None:
             self._ref = (counter, host_s)
+            self._keep(counter, host_s)
             return None
-        c0, h0 = self._ref
+        self._keep(counter, host_s)
+        h0 = self._ref[1]
         host = host_s - h0
         if host < CLOCK_WINDOW_S:
             return None
-        ctrl = (counter - c0) * self.T
-        ratio = ctrl / host / self.expected
-        if 1.0 / CLOCK_TOLERANCE <= ratio <= CLOCK_TOLERANCE or abs(ctrl / self.expected - host) < CLOCK_SLACK_S:
+        least: list[tuple[float, int, float] | None] = [None, None, None]
+        for e in self._least.values():
+            k = min(2, int(3 * (e[2] - h0) / host))
+            if least[k] is None or e < least[k]:
+                least[k] = e
+        if None in least:
             return None
+        ratios = [(b[1] - a[1]) * self.T / (b[2] - a[2]) / self.expected
+                  for a, b in zip(least, least[1:])]  # type: ignore[index]
+        slow = max(ratios) < 1.0 / CLOCK_TOLERANCE
+        fast = min(ratios) > CLOCK_TOLERANCE
+        (_, ca, ha), (_, cb, hb) = least[0], least[2]  # type: ignore[misc]
+        ctrl, span = (cb - ca) * self.T, hb - ha
+        if not (slow or fast) or abs(ctrl / self.expected - span) < CLOCK_SLACK_S:
+            return None
+        ratio = ctrl / span / self.expected
         speed = "" if self.expected == 1.0 else f" (expected {self.expected:g} times, a replay at that speed)"
-        measured = host * self.expected / (counter - c0) if counter > c0 else float("inf")
+        measured = span * self.expected / (cb - ca) if cb > ca else float("inf")
         return (f"the controller's clock runs {ratio * self.expected:.3g} times as fast as the host's{speed}: "
-                f"counters {c0}..{counter} span {ctrl:.6g} s at the announced sample period {self.T:g} s but "
-                f"arrived over {host:.3f} s of host time (a sample every {measured:.3g} s); the log's times "
+                f"counters {ca}..{cb} span {ctrl:.6g} s at the announced sample period {self.T:g} s but "
+                f"arrived over {span:.3f} s of host time (a sample every {measured:.3g} s); the log's times "
                 f"would be wrong: check {self.hint or 'the sample period the controller announces'}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from drivers.plausibility import CLOCK_WINDOW_S, ClockCheck
@@ -39,6 +40,34 @@ def test_a_stall_of_the_capture_is_not_a_slow_clock():
     assert check.check(0, 0.0) is None
     # 0.4 s of stall right after the start, then on time: ratio 0.71 at 1.4 s, but only 0.4 s apart
     assert check.check(1000, 1.4) is None
+
+
+def feed_arrivals(check: ClockCheck, arrivals) -> str | None:
+    """Feed (counter, host s) arrivals in order; the first error, or None."""
+    for c, h in arrivals:
+        err = check.check(c, h)
+        if err:
+            return err
+    return None
+
+
+def on_time(t0: float, t1: float, rate: float = 1000.0, every: float = 0.02):
+    """Batches every ``every`` s of host time from t0 to t1, each carrying the tick made then."""
+    return [(round(h * rate), h) for h in np.arange(t0, t1, every)]
+
+
+def test_a_stall_of_the_controller_or_the_link_is_not_a_slow_clock():
+    # on time for 1 s, then nothing for 0.7 s; the first batch after the pause carries the
+    # counter the controller had reached when it paused, then it catches up
+    arrivals = on_time(0.0, 1.0) + [(1000, 1.7)] + on_time(1.72, 6.0)
+    assert feed_arrivals(ClockCheck(0.001), arrivals) is None
+
+
+def test_a_slow_clock_is_found_through_stalls():
+    # a controller at 2 ms announced as 1 ms, its batches held up 0.4 s twice
+    arrivals = [(c, h) for c, h in on_time(0.0, 6.0, rate=500.0) if not (1.0 < h < 1.4 or 3.0 < h < 3.4)]
+    err = feed_arrivals(ClockCheck(0.001), arrivals)
+    assert err is not None and "runs 0.5 times as fast" in err
 
 
 def test_a_replay_at_a_known_speed_is_expected_to_run_that_fast():

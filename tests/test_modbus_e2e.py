@@ -11,6 +11,9 @@ The process handling and the checks every transport shares are in tests/_capture
 
 from __future__ import annotations
 
+import os
+import signal
+import time
 import warnings
 from dataclasses import replace
 
@@ -20,7 +23,7 @@ import pytest
 from _capture_procs import (FAULT_SEED, INJECTED_FAULTS, LOG, Server, assert_complete_and_exact, capture,
                             assert_failed_with_one_line, assert_recorded_all_but,
                             assert_sigkill_loses_at_most_one_second, assert_values_exact, injected_faults,
-                            read_fault_log, serve_and_capture, start_capture, wait_for_size)
+                            read_fault_log, serve_and_capture, start_capture, wait_for_size, write_program, MOVES)
 from _capture_procs import program, simulated  # noqa: F401  (module-scoped fixtures, requested by name)
 from virtual_cnc.machine_run import simulate as run_programs
 from core.reader import load_mcap, load_recording
@@ -90,6 +93,25 @@ def test_live_polling_records_exact_values_and_counts_the_ticks_it_did_not_see(t
     assert_values_exact(log, simulated, k, wire)
     s = log.metadata["summary"]
     assert s["dropped"] == (k[-1] - k[0] + 1) - len(k)
+
+
+def test_a_controller_that_pauses_is_recorded_whole_not_refused_as_a_wrong_clock(tmp_path):
+    # The controller process stops for 0.7 s one second in: its samples arrive late, then it
+    # catches up.  A late batch is no wrong sample period; the capture goes on to the end.
+    prog = write_program(tmp_path / "long.nc", MOVES * 3)  # about 4.7 s
+    with Server(["-t", "modbus", str(prog)], tmp_path) as srv:
+        cap = start_capture(["--port", srv.port, "-o", LOG], tmp_path)
+        wait_for_size(tmp_path / LOG, 1)
+        time.sleep(1.0)
+        os.kill(srv.proc.pid, signal.SIGSTOP)
+        time.sleep(0.7)
+        os.kill(srv.proc.pid, signal.SIGCONT)
+        _, err = cap.communicate(timeout=60)
+    assert cap.returncode == 0, err
+    log = load_recording(tmp_path / LOG)
+    assert log.metadata["summary"]["end"] == "program ended"
+    k = log.metadata["counter"]
+    np.testing.assert_array_equal(k, np.arange(len(k)))
 
 
 def test_a_controller_gone_for_good_ends_with_one_line_and_a_complete_log(tmp_path, program, simulated):
