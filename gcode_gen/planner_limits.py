@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import InputError
-from gcode_gen.linuxcnc_ini import linear_units_mm, read_sections
+from core.linuxcnc_ini import linear_units_mm, read_sections
 
 __all__ = ["PlannerLimits", "read_linuxcnc_ini"]
 
@@ -57,7 +57,7 @@ def _number(secs: dict, section: str, key: str, path: Path) -> float | None:
 def read_linuxcnc_ini(path: str | Path) -> PlannerLimits:
     """The planner limits of a LinuxCNC INI file (module docstring), in mm; one line naming what is missing.
 
-    Read as LinuxCNC reads it (:mod:`gcode_gen.linuxcnc_ini`: ``#INCLUDE`` expanded, indented
+    Read as LinuxCNC reads it (:mod:`core.linuxcnc_ini`: ``#INCLUDE`` expanded, indented
     keys, the first of equal keys); velocities and accelerations are in the machine's units,
     ``[TRAJ] LINEAR_UNITS``, and converted to mm (an inch machine's 4 in/s is 101.6 mm/s).
     Line numbers in messages are those of the INI with its includes expanded.

@@ -137,6 +137,27 @@ def test_capture_records_every_servo_period_as_motion_commanded_it(tmp_path):
           f"commanded and actual identical in all {n}")
 
 
+def test_an_inch_machine_is_recorded_in_mm_read_from_the_ini_it_runs(tmp_path):
+    """HAL's positions are in the INI's units: on a machine of ``LINEAR_UNITS = inch`` the
+    capture (no ``scale=``) reads the INI LinuxCNC was started with and records mm."""
+    ini = tmp_path / "inch.ini"
+    ini.write_text((lx.lm.HERE / "machine.ini").read_text().replace("LINEAR_UNITS = mm", "LINEAR_UNITS = inch"))
+    prog = tmp_path / "half_inch.ngc"
+    prog.write_text("G20 G90 G61 G1 X0.5 F30\nG4 P0.3\nG1 X0\nM2\n")  # an exact stop at 0.5 in
+    lx.stop_machine()  # one LinuxCNC per computer
+    m = lx.lm.Machine(ini=ini).start()
+    try:
+        res = lx.capture_run(m, [prog], tmp_path / "log.mcap")
+    finally:
+        m.stop()
+    assert res.returncode == 0, res.stderr
+    log = load_recording(tmp_path / "log.mcap")
+    stream = log.metadata["stream"]
+    assert "machine.ini: [TRAJ] LINEAR_UNITS" in stream["units_from"]
+    assert stream["scale_to_mm"] == [25.4]
+    assert log.axes["X"].commanded.max() == pytest.approx(12.7, abs=1e-9)  # 0.5 in
+
+
 def test_capture_is_passive_the_netlist_is_unchanged(tmp_path):
     m = lx.machine()
     prog = tmp_path / "short.ngc"

@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import pytest
 
 from core.errors import InputError
 from drivers.registry import open_driver
+from drivers.transports.linuxcnc_hal import _started_with_ini
 
 
 def test_defaults_read_joint_0_motor_pins_as_x():
@@ -36,3 +40,26 @@ def test_joints_axes_and_pin_templates():
 def test_bad_options_are_one_line_errors(url, match):
     with pytest.raises(InputError, match=match):
         open_driver(url)
+
+
+def test_the_units_come_from_the_ini_the_running_linuxcnc_was_started_with(tmp_path):
+    # LinuxCNC's start script exports INI_FILE_NAME to what it starts (rtapi_app among them);
+    # a process started so stands in for rtapi_app here
+    (tmp_path / "lathe.ini").write_text("[TRAJ]\n  LINEAR_UNITS = inch\n[JOINT_0]\nTYPE = LINEAR\n"
+                                        "[JOINT_1]\nTYPE = ANGULAR\n")
+    proc = subprocess.Popen([sys.executable, "-c", "print('up', flush=True); input()"], cwd=tmp_path,
+                            env={"INI_FILE_NAME": "lathe.ini"}, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    try:
+        proc.stdout.readline()  # its environment is the one given once it runs (not the fork's)
+        ini = _started_with_ini(proc.pid)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert ini == tmp_path / "lathe.ini"
+    scales, units, source = open_driver("linuxcnc://?joints=0,1")._joint_units(ini)
+    assert (scales, units) == ([25.4, 1.0], ("mm", "deg"))
+    assert source.startswith(str(ini))
+    # scale= wins, on every joint; without an INI positions are taken as mm, and the log says so
+    assert open_driver("linuxcnc://?joints=0,1&scale=2")._joint_units(ini)[:2] == ([2.0, 2.0], ("mm", "mm"))
+    scales, units, source = open_driver("linuxcnc://")._joint_units(None)
+    assert (scales, units) == ([1.0], ("mm",)) and "not found" in source

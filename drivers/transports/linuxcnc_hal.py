@@ -13,9 +13,17 @@ pin true while a program runs; default ``halui.program.is-running``; ``running=`
 none), ``end_idle`` (s the running pin must stay false after a program before the capture
 ends; default 1.0, long enough for the gap between two programs run back to back),
 ``thread`` (default ``servo-thread``), ``depth`` (FIFO depth in samples, default 60000),
-``scale`` (machine units → mm; default 1, 25.4 for an inch machine), ``channel`` (use FIFO N
+``scale`` (machine units → mm, every joint; default: read from the running LinuxCNC's INI,
+below), ``channel`` (use FIFO N
 of a ``sampler`` the HAL already loaded — only one sampler module can be loaded — instead
 of loading one; its columns must be unlinked and typed as below).
+
+Units: HAL's positions are in machine units, which the INI sets (``[TRAJ] LINEAR_UNITS``, mm
+or inch).  Without ``scale=`` the driver reads the INI LinuxCNC was started with (its start
+script exports ``INI_FILE_NAME`` to the processes it starts, ``rtapi_app`` among them): a
+linear joint is recorded in mm (inches × 25.4), a joint of ``[JOINT_n] TYPE = ANGULAR`` in
+degrees.  Where that INI cannot be read, positions are taken as mm.  The log's stream info
+says which (``scale_to_mm`` per joint, ``units_from``).
 
 It runs on the computer that runs LinuxCNC.  On open it loads LinuxCNC's ``sampler``
 with one FIFO whose columns are each joint's commanded and actual position, the running
@@ -42,8 +50,10 @@ import select
 import shutil
 import signal
 import subprocess
+from pathlib import Path
 
 from core.errors import InputError, TransportError
+from core.linuxcnc_ini import linear_units_mm, read_sections
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.url import PortURL
 
@@ -88,12 +98,12 @@ class LinuxCNCDriver(Driver):
         self.end_idle = url.option("end_idle", float, 1.0)
         self.thread = url.option("thread", str, "servo-thread")
         self.depth = url.option("depth", int, 60000)
-        self.scale = url.option("scale", float, 1.0)
+        self.scale = url.option("scale", float, None)  # None: from the running LinuxCNC's INI
         self.channel = url.option("channel", int, None)
         if self.channel is not None and not 0 <= self.channel < 16:
             raise InputError.about("port", f"{url.raw}: channel must be a sampler FIFO number 0..15")
         self._ch = self.channel or 0
-        if self.depth < 100 or not self.end_idle >= 0 or not self.scale > 0:
+        if self.depth < 100 or not self.end_idle >= 0 or not (self.scale is None or self.scale > 0):
             raise InputError.about("port", f"{url.raw}: need depth >= 100, end_idle >= 0 and scale > 0")
         self._user: pwd.struct_passwd | None = None
         self._proc: subprocess.Popen | None = None
@@ -101,6 +111,7 @@ class LinuxCNCDriver(Driver):
         self._added: list[str] = []  # teardown steps done so far, in order
         self._own_signals: list[str] = []
         self._period = 0.0
+        self._scales: list[float] = []  # per FIFO column: machine units -> mm (or deg)
         self._seen_running = False
         self._idle_samples = 0
 
@@ -133,11 +144,14 @@ class LinuxCNCDriver(Driver):
         if shutil.which("halcmd") is None or shutil.which("halsampler") is None:
             raise TransportError("LinuxCNC is not installed here (no halcmd/halsampler on PATH); "
                                  "capture with linuxcnc:// on the computer that runs LinuxCNC")
-        owner = _rtapi_owner()
-        if owner is None:
+        rtapi = _rtapi_process()
+        if rtapi is None:
             raise TransportError("LinuxCNC is not running (no rtapi_app process); start LinuxCNC, then capture")
+        owner = rtapi[1]
         if os.geteuid() == 0 and owner != 0:
             self._user = pwd.getpwuid(owner)
+        scales, units, units_from = self._joint_units(_running_ini())
+        self._scales = [f for f in scales for _ in (0, 1)]  # commanded and actual columns
         self._period = self._thread_period()
         pins = self._check_pins()
         cfg = "ff" * len(self.joints) + ("b" if self.running_pin else "") + "s"
@@ -161,10 +175,29 @@ class LinuxCNCDriver(Driver):
             axes=self.names,
             sample_period=self._period,
             controller=f"LinuxCNC (HAL sampler in {self.thread})",
-            units=tuple("mm" for _ in self.names),
+            units=units,
             extra={"pins": self.pins, "running_pin": self.running_pin or "", "thread": self.thread,
-                   "fifo_depth": self.depth, "scale_to_mm": self.scale},
+                   "fifo_depth": self.depth, "scale_to_mm": scales, "units_from": units_from},
         )
+
+    def _joint_units(self, ini: Path | None) -> tuple[list[float], tuple[str, ...], str]:
+        """Per joint: the factor from machine units to the recorded unit, the unit ("mm" or
+        "deg"), and where they come from (``scale=``, the INI, or the mm default)."""
+        n = len(self.joints)
+        if self.scale is not None:
+            return [self.scale] * n, ("mm",) * n, "the port's scale= option"
+        if ini is None:
+            return [1.0] * n, ("mm",) * n, "default: mm (the INI LinuxCNC was started with was not found)"
+        try:
+            secs = read_sections(ini)
+            mm = linear_units_mm(secs, ini)
+        except InputError as exc:
+            return [1.0] * n, ("mm",) * n, f"default: mm ({exc})"
+        kinds = [secs.get(f"JOINT_{j}", {}).get("TYPE", (0, "LINEAR"))[1].split("#")[0].strip().upper()
+                 for j in self.joints]
+        scales = [1.0 if k == "ANGULAR" else mm for k in kinds]
+        units = tuple("deg" if k == "ANGULAR" else "mm" for k in kinds)
+        return scales, units, f"{ini}: [TRAJ] LINEAR_UNITS, [JOINT_n] TYPE"
 
     def _thread_period(self) -> float:
         for line in self._hal("show", "thread").splitlines():
@@ -255,7 +288,7 @@ class LinuxCNCDriver(Driver):
             if len(f) < 2 * n + 2:  # "overrun" notes and blank lines: losses show in the counter
                 continue
             counter = int(f[0]) + int(f[-1])
-            v = [float(x) * self.scale for x in f[1:1 + 2 * n]]
+            v = [float(x) * k for x, k in zip(f[1:1 + 2 * n], self._scales)]
             if self.running_pin:
                 self._track_program(f[1 + 2 * n] == b"1")
             self.stats.received += 1
@@ -306,21 +339,57 @@ class LinuxCNCDriver(Driver):
         self._own_signals.clear()
 
 
-def _rtapi_owner() -> int | None:
-    """The uid of the user running ``rtapi_app`` (LinuxCNC's realtime process), None if none.
+def _rtapi_processes() -> list[tuple[int, int]]:
+    """(pid, uid of its user) of every live ``rtapi_app`` (LinuxCNC's realtime process), oldest
+    first: the first is the realtime master; ``halcmd loadrt`` starts short-lived ones beside it.
 
     rtapi_app is setuid root for realtime priorities: its real and effective uid may be 0,
     the file-system uid (the last of /proc's four) stays the user who started LinuxCNC.
     """
+    found = []
     for entry in os.listdir("/proc"):
         if not entry.isdigit():
             continue
         try:
             with open(f"/proc/{entry}/status") as f:
                 status = f.read()
-        except OSError:
+            with open(f"/proc/{entry}/stat") as f:
+                started = int(f.read().rsplit(")", 1)[1].split()[19])  # field 22: start time in ticks
+        except (OSError, IndexError, ValueError):
             continue
         lines = dict(line.split(":", 1) for line in status.splitlines() if ":" in line)
-        if lines.get("Name", "").strip() == "rtapi_app":
-            return int(lines["Uid"].split()[-1])
+        if lines.get("Name", "").strip() == "rtapi_app" and lines.get("State", "").split()[:1] not in (["Z"], ["X"]):
+            found.append((started, int(entry), int(lines["Uid"].split()[-1])))
+    return [(pid, uid) for _, pid, uid in sorted(found)]
+
+
+def _rtapi_process() -> tuple[int, int] | None:
+    """(pid, uid) of the realtime master ``rtapi_app``, None if LinuxCNC is not running."""
+    procs = _rtapi_processes()
+    return procs[0] if procs else None
+
+
+def _started_with_ini(pid: int) -> Path | None:
+    """The INI file the process ``pid`` was started with (``INI_FILE_NAME`` in its
+    environment, relative to its working directory), None if it has none or we may not read it."""
+    try:
+        with open(f"/proc/{pid}/environ", "rb") as f:
+            env = dict(v.split(b"=", 1) for v in f.read().split(b"\0") if b"=" in v)
+        name = env.get(b"INI_FILE_NAME")
+        if not name:
+            return None
+        path = Path(os.fsdecode(name))
+        if not path.is_absolute():
+            path = Path(os.readlink(f"/proc/{pid}/cwd")) / path
+    except OSError:
+        return None
+    return path if path.is_file() else None
+
+
+def _running_ini() -> Path | None:
+    """The INI the running LinuxCNC was started with: from the oldest ``rtapi_app`` that has one."""
+    for pid, _ in _rtapi_processes():
+        ini = _started_with_ini(pid)
+        if ini is not None:
+            return ini
     return None

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Mapping
 
 from core.errors import InputError
-from gcode_gen.linuxcnc_ini import KEY_LINE, linear_units_mm, sections
+from core.linuxcnc_ini import KEY_LINE, linear_units_mm, sections
 from ident.tuning.controllers import GAIN_NAMES, Gains
 
 __all__ = ["read_joint_gains", "ini_diff", "format_value"]
