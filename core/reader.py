@@ -46,13 +46,18 @@ def load_recording(path: str | Path) -> Recording:
             head = fh.read(8)
         if head.startswith(b"\x89MCAP"):
             rec = load_mcap(path)
-        elif head.lstrip(b' \t"').startswith(b"t_s"):
+        elif head.removeprefix(b"\xef\xbb\xbf").lstrip(b' \t"').lower().startswith(b"t_s"):
             rec = load_csv(path)
         else:  # a part program, a .mat file, …
             raise RecordingError(f"{path}: not a recording (an .mcap log, or a CSV whose first column is t_s)")
     check_recording(rec, str(path))
     rec.metadata["source"] = str(path)
     return rec
+
+
+#: A position farther than this from zero (mm, or degrees) is no machine axis's: 1000 km, or
+#: 2.8 million turns.  Beyond it the recording's squares and differences overflow.
+MAX_POSITION = 1e9
 
 
 def check_recording(rec: Recording, name: str = "recording") -> None:
@@ -71,6 +76,13 @@ def check_recording(rec: Recording, name: str = "recording") -> None:
                 k = int(np.flatnonzero(bad)[0])
                 raise RecordingError(
                     f"{name}: axis {axis} {label} position is NaN/inf at sample {k} (t={rec.t[k]:.6g} s)"
+                )
+            far = np.abs(arr) > MAX_POSITION
+            if far.any():
+                k = int(np.flatnonzero(far)[0])
+                raise RecordingError(
+                    f"{name}: axis {axis} {label} position {arr[k]:.6g} at sample {k} (t={rec.t[k]:.6g} s) "
+                    f"is no machine position (farther than {MAX_POSITION:g} from zero)"
                 )
     dt = np.diff(rec.t)
     if np.any(dt <= 0):
@@ -178,15 +190,22 @@ def load_csv(path: str | Path) -> Recording:
 
     A single axis may be written ``commanded_mm,actual_mm`` (named ``X``).  An optional
     ``segment`` column marks program segments.  The sample period is the median step of t.
+
+    Read as spreadsheets write it too: a UTF-8 byte-order mark (Excel's "CSV UTF-8") is
+    skipped, column names have no case, and a header without a comma but with semicolons
+    or tabs sets that separator — numbers may then use a decimal comma (``0,001``), as a
+    spreadsheet set to a European locale writes them.
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError:
         raise RecordingError(f"{path}: not a text CSV file") from None
-    reader = csv.reader(io.StringIO(text))
+    first = text.split("\n", 1)[0]
+    sep = next((c for c in ",;\t" if c in first), ",")
+    reader = csv.reader(io.StringIO(text), delimiter=sep)
     try:
-        header = [h.strip() for h in next(reader)]
+        header = [h.strip().lower() for h in next(reader)]
     except StopIteration:
         raise RecordingError(f"{path}: file is empty") from None
     if not header or header[0] != "t_s":
@@ -224,7 +243,7 @@ def load_csv(path: str | Path) -> Recording:
         if len(row) != len(header):
             raise RecordingError(f"{path}:{lineno}: {len(row)} fields, header has {len(header)} (truncated row?)")
         try:
-            rows.append([float(c) for c in row])
+            rows.append([float(c) for c in row] if sep == "," else [float(c.replace(",", ".")) for c in row])
         except ValueError:
             raise RecordingError(f"{path}:{lineno}: a field is not a number: {row!r}") from None
     if not rows:

@@ -106,6 +106,24 @@ def test_a_file_that_is_no_recording_is_called_so_whatever_its_suffix(tmp_path):
     assert load_recording(quoted).axis_names == ["X"]
 
 
+@pytest.mark.parametrize("content", [
+    "\ufefft_s,commanded_mm,actual_mm\n0,0,0\n0.001,0.1,0.05\n",  # Excel's "CSV UTF-8": a byte-order mark
+    "t_s;commanded_mm;actual_mm\n0;0;0\n0,001;0,1;0,05\n",  # a European locale: semicolons, decimal commas
+    "t_s;commanded_mm;actual_mm\n0;0;0\n0.001;0.1;0.05\n",
+    "t_s\tcommanded_mm\tactual_mm\n0\t0\t0\n0.001\t0.1\t0.05\n",
+    "T_S,COMMANDED_MM,ACTUAL_MM\n0,0,0\n0.001,0.1,0.05\n",
+])
+def test_a_csv_is_read_as_spreadsheets_write_it(tmp_path, content):
+    for name in ("run.csv", "run.txt"):  # by its suffix, and by what it holds
+        path = tmp_path / name
+        path.write_bytes(content.encode())
+        rec = load_recording(path)
+        assert rec.axis_names == ["X"]
+        np.testing.assert_array_equal(rec.t, [0.0, 0.001])
+        np.testing.assert_array_equal(rec.axes["X"].commanded, [0.0, 0.1])
+        np.testing.assert_array_equal(rec.axes["X"].actual, [0.0, 0.05])
+
+
 @pytest.mark.parametrize(
     "content, message",
     [
@@ -113,6 +131,7 @@ def test_a_file_that_is_no_recording_is_called_so_whatever_its_suffix(tmp_path):
         ("t_s,commanded_mm,actual_mm\n", "contains no samples"),
         ("t_s,commanded_mm,actual_mm\n0,0,0\n", "single sample"),
         ("t_s,commanded_mm,actual_mm\n0,0,0\n0.001,nan,0\n0.002,0,0\n", "NaN/inf at sample 1"),
+        ("t_s,commanded_mm,actual_mm\n0,0,0\n0.001,1e300,0\n0.002,0,0\n", "1e\\+300 at sample 1 .* is no machine position"),
         ("t_s,commanded_mm,actual_mm\n0,0,0\n0.002,0,0\n0.001,0,0\n", "time goes backwards at sample 2"),
         ("t_s,commanded_mm,actual_mm\n0,0,0\n0.001,0\n", "truncated row"),
         ("time,x,y\n0,0,0\n", "first column must be t_s"),
