@@ -7,13 +7,24 @@ from __future__ import annotations
 
 from core.errors import InputError
 
-__all__ = ["check_seed", "check_machine"]
+__all__ = ["check_seed", "check_machine", "parse_plane"]
 
 
 def check_seed(seed: int, flag: str = "--seed") -> None:
     """Random seeds are whole numbers >= 0 (numpy's generators refuse negative ones)."""
     if seed < 0:
         raise InputError(f"{flag} must be a whole number >= 0, got {seed}")
+
+
+def parse_plane(text: str) -> tuple[str, ...]:
+    """The axes of a plane option: ``X,Y`` (names, comma separated) or ``XY`` (two letters).
+
+    Axis names may be longer than a letter (a gantry's ``Y2``), so only a single two-letter
+    word with no comma is read as two letters."""
+    names = tuple(a.strip().upper() for a in text.split(",") if a.strip())
+    if len(names) == 1 and len(names[0]) == 2 and names[0].isalpha():
+        return tuple(names[0])
+    return names
 
 
 def check_machine(machine: str | None) -> None:

@@ -59,7 +59,7 @@ import numpy as np
 from core.errors import InputError
 from core.run_limits import check_run_size
 from gcode_gen.path_mode import path_tolerances
-from gcode_gen.program import Block, Program
+from gcode_gen.program import ARC_ORDER, Block, Program
 
 __all__ = ["Trajectory", "Profile", "interpolate", "interpolate_programs", "concatenate", "plan_profile",
            "AxisLimits", "ARC_NORMAL_RATIO_PATH", "ARC_NORMAL_RATIO_LINUXCNC"]
@@ -420,7 +420,7 @@ def _chain_positions(sg: _Segment, n: int) -> tuple[np.ndarray, np.ndarray]:
 def _plane_axes(b: Block) -> tuple[str, str]:
     """The arc plane's (first, second) axes: G3 turns from the first towards the second
     (G17 X→Y, G18 Z→X, G19 Y→Z, as RS274/NGC counts the sense seen from the third axis's +)."""
-    return {"XY": ("X", "Y"), "XZ": ("Z", "X"), "YZ": ("Y", "Z")}[b.plane]
+    return ARC_ORDER[b.plane]
 
 
 def _arc_segment(b: Block, p: np.ndarray, q: np.ndarray, index: dict[str, int], feed: float, a_max: float,

@@ -20,10 +20,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["AXIS_LETTERS", "MOTIONS", "Block", "Program", "Toolpath"]
+__all__ = ["AXIS_LETTERS", "MOTIONS", "ARC_ORDER", "ARC_PLANES", "PLANE_CODES", "Block", "Program", "Toolpath"]
 
 #: Axis letters the generator, writers and interpreter accept.
 AXIS_LETTERS: tuple[str, ...] = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
+
+#: Each arc plane's (first, second) axes: G3 turns from the first towards the second (ccw
+#: seen from the third axis's +), as RS274/NGC counts it.
+ARC_ORDER: dict[str, tuple[str, str]] = {"XY": ("X", "Y"), "XZ": ("Z", "X"), "YZ": ("Y", "Z")}
+#: The plane of an arc between two axes, in either order.
+ARC_PLANES: dict[frozenset, str] = {frozenset(axes): plane for plane, axes in ARC_ORDER.items()}
+#: The G-code that selects each plane.
+PLANE_CODES: dict[str, str] = {"XY": "G17", "XZ": "G18", "YZ": "G19"}
 
 #: Motion kinds a block can carry: rapid, linear, clockwise arc, counter-clockwise arc, dwell.
 MOTIONS: tuple[str, ...] = ("G0", "G1", "G2", "G3", "G4")

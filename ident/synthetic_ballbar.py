@@ -36,7 +36,7 @@ import numpy as np
 from core.errors import InputError
 from core.recording import Recording
 from gcode_gen.commands import CommandedRun
-from gcode_gen.program import Block, Toolpath
+from gcode_gen.program import ARC_ORDER, ARC_PLANES, Block, Toolpath
 from ident.axis_model import AxisModel
 from ident.ballbar import BallbarResult, BallbarRun, analyse_ballbar, ballbar_run, check_test_size, words
 from ident.virtual_machine import VirtualMachine
@@ -134,10 +134,20 @@ def axis_lag_s(model: AxisModel, f_hz: float) -> float:
 def ballbar_program(radius: float = DEFAULT_RADIUS_MM, feed: float = DEFAULT_FEED_MM_S,
                     centre: tuple[float, float] = (0.0, 0.0), axes: tuple[str, str] = ("X", "Y"),
                     lead_deg: float = LEAD_DEG, start_deg: float = START_DEG, decimals: int = 4) -> Toolpath:
-    """The ballbar test as one program: ccw feed-in, data and feed-out arcs, a dwell, then cw back over them."""
+    """The ballbar test as one program: ccw feed-in, data and feed-out arcs, a dwell, then cw back over them.
+
+    ccw and cw are senses in the plane of ``axes`` as given (from the first axis towards the
+    second): in the XZ plane (G18, whose arcs turn from Z towards X) ccw of ``("X", "Z")``
+    is G2."""
     if not (0.0 <= lead_deg <= 360.0):
         raise InputError(f"feed-in/out arc {lead_deg}° must be within 0 … 360°")
     a, b = axes
+    plane = ARC_PLANES.get(frozenset(axes))
+    if plane is None:
+        raise InputError.about("axes", f"a ballbar circle lies in the XY, XZ or YZ plane (G17, G18, G19 arcs); "
+                                       f"got {a},{b}")
+    ccw = "G3" if (a, b) == ARC_ORDER[plane] else "G2"
+    cw = "G2" if ccw == "G3" else "G3"
     cx, cy = (round(float(c), decimals) for c in centre)
 
     def at(deg: float) -> dict[str, float]:
@@ -145,15 +155,16 @@ def ballbar_program(radius: float = DEFAULT_RADIUS_MM, feed: float = DEFAULT_FEE
         return {a: round(cx + radius * math.cos(phi), decimals), b: round(cy + radius * math.sin(phi), decimals)}
 
     def arc(motion: str, deg: float) -> Block:
-        return Block(line=0, n=None, motion=motion, target=at(deg), feed=float(feed), center={a: cx, b: cy})
+        return Block(line=0, n=None, motion=motion, target=at(deg), feed=float(feed), center={a: cx, b: cy},
+                     plane=plane)
 
     dwell = Block(line=0, n=None, motion="G4", dwell_s=DWELL_S)
     blocks = [Block(line=0, n=None, motion="G0", target=at(start_deg - lead_deg)), dwell]
-    for motion, sign in (("G3", 1.0), ("G2", -1.0)):
+    for motion, sign in ((ccw, 1.0), (cw, -1.0)):
         blocks += [arc(motion, start_deg)] if lead_deg > 0 else []  # feed-in
         blocks += [arc(motion, start_deg)]  # the data arc: a full circle
         blocks += [arc(motion, start_deg + sign * lead_deg)] if lead_deg > 0 else []  # feed-out
-        if motion == "G3":
+        if motion == ccw:
             blocks.append(dwell)
     header = {"program": "ballbar test", "toolpath": "ballbar", "axes": ",".join(axes), "radius": f"{radius:g}",
               "center": f"{cx:g},{cy:g}", "feed": f"{feed:g}", "feed_units": "mm/s", "start_deg": f"{start_deg:g}",

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import pytest
 from typer.testing import CliRunner
@@ -13,7 +14,9 @@ import gcode_gen
 import ident
 import virtual_cnc
 from agent import cli
-from ident.synthetic_ballbar import START_DEG, ballbar_of_recording, run_ballbar
+from agent.validation import parse_plane
+from core.errors import InputError
+from ident.synthetic_ballbar import START_DEG, ballbar_of_recording, ballbar_program, run_ballbar
 
 cli._register()
 
@@ -50,6 +53,33 @@ def test_mismatched_loops_show_the_ellipse_on_the_right_diagonal_and_the_lag_dif
     own = drives_own_test(mismatched)
     assert test.result.servo_ellipse_deg == own.servo_ellipse_deg == {"ccw": 135, "cw": 45}
     assert any(w.startswith("servo mismatch") and "Y lags X" in w for w in test.words())
+
+
+def test_the_ballbar_runs_in_every_plane_and_ccw_turns_from_the_first_axis_to_the_second(mismatched):
+    vm = identified_machine(mismatched)
+    xy = run_ballbar(vm, radius=R, feed=V, axes=("X", "Y"))
+    # the same drives as X and Z: the XZ plane (G18 arcs, which turn from Z to X) reads the same
+    xz = run_ballbar(replace(vm, axes={"X": vm.axes["X"], "Z": vm.axes["Y"]}), radius=R, feed=V, axes=("X", "Z"))
+    assert xz.result.servo_mismatch_ms == pytest.approx(xy.result.servo_mismatch_ms, rel=1e-6)
+    assert xz.result.servo_ellipse_deg == xy.result.servo_ellipse_deg == {"ccw": 135, "cw": 45}
+    # the axes the other way round: Y is now the first axis, and it lags
+    yx = run_ballbar(vm, radius=R, feed=V, axes=("Y", "X"))
+    assert yx.result.servo_mismatch_ms == pytest.approx(-xy.result.servo_mismatch_ms, rel=1e-6)
+    with pytest.raises(InputError, match="XY, XZ or YZ plane"):
+        run_ballbar(replace(vm, axes={"X": vm.axes["X"], "A": vm.axes["Y"]}), radius=R, feed=V, axes=("X", "A"))
+
+
+def test_a_ballbar_program_outside_the_xy_plane_selects_its_plane_and_gives_its_centre_in_i_j_k():
+    text = gcode_gen.write(ballbar_program(10.0, 20.0, (0.0, 0.0), ("X", "Z"), lead_deg=0.0), "linuxcnc")
+    arcs = [ln for ln in text.splitlines() if ln.startswith(("G2 ", "G3 ", "G18 "))]
+    # ccw from X towards Z is clockwise in G18 (seen from +Y, Z to X counts as ccw)
+    assert arcs == ["G18 G2 X7.0711 Z7.0711 I-7.0711 K-7.0711 F1200", "G3 X7.0711 Z7.0711 I-7.0711 K-7.0711"]
+
+
+@pytest.mark.parametrize("text, plane", [("X,Z", ("X", "Z")), ("xz", ("X", "Z")), ("Y, X", ("Y", "X")),
+                                         ("Y2,X", ("Y2", "X"))])
+def test_a_plane_is_two_axis_names_or_two_letters(text, plane):
+    assert parse_plane(text) == plane
 
 
 @pytest.mark.slow

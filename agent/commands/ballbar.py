@@ -16,7 +16,7 @@ def ballbar(
     set_: List[str] = typer.Option([], "--set", help="Override a parameter, AXIS.PARAM=VALUE: a second machine to compare."),
     radius: float = typer.Option(100.0, "--radius", help="Ballbar length (circle radius), mm."),
     feed: float = typer.Option(1000.0 / 60.0, "--feed", help="Test feed, mm/s.", show_default="16.67 = 1000 mm/min"),
-    axes: str = typer.Option("X,Y", "--axes", help="The plane: two axis letters."),
+    axes: str = typer.Option("X,Y", "--axes", help="The plane: two axis letters (X,Z or XZ)."),
     centre: str = typer.Option("0,0", "--centre", help="Circle centre in the plane, mm."),
     center: Optional[str] = typer.Option(None, "--center", hidden=True),  # the other spelling, kept working
     against: List[Path] = typer.Option([], "--against", help="Recordings of the same test (the whole test, or ccw "
@@ -34,6 +34,7 @@ def ballbar(
     Example: agent ballbar --machine result.json --radius 100 --feed 16.67 --report ballbar.html
     """
     from agent.outputs import check_output, write_json
+    from agent.validation import parse_plane
     from agent.workflows.predict import load_machines
     from core.reader import load_recording
     from ident.synthetic_ballbar import run_ballbar
@@ -41,7 +42,7 @@ def ballbar(
     check_output(json_out, "--json", ".json")
     check_output(report, "--report", ".html")
     centre = center or centre
-    plane = tuple(a.strip().upper() for a in axes.split(",") if a.strip())
+    plane = parse_plane(axes)
     try:
         c = tuple(float(v) for v in centre.split(","))
     except ValueError:

@@ -24,7 +24,7 @@ def tune(
                                              help="Judge the ballbar as run: one program with feed-in/out arcs of "
                                                   "this many degrees (agent ballbar's, default there 180); without, "
                                                   "the two circles each from rest."),
-    axes: Optional[str] = typer.Option(None, "--axes", help="Ballbar plane, two axis letters (default X,Y)."),
+    axes: Optional[str] = typer.Option(None, "--axes", help="Ballbar plane, two axis letters (default X,Y; X,Z or XZ)."),
     u_max: float = typer.Option(10.0, "--u-max", help="Output limit, V, for p-pi/pid (LinuxCNC: MAX_OUTPUT)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write gains, margins and predictions as JSON."),
     recording: Optional[Path] = typer.Option(None, "--recording",
@@ -40,6 +40,7 @@ def tune(
     Never writes to a controller.  Example: agent tune --machine result.json --ballbar --ini machine.ini
     """
     from agent.outputs import check_output
+    from agent.validation import parse_plane
     from agent.workflows.tune import tune_files
     from core.errors import InputError
     from ident.tuning import CONTROLLER_FORMS
@@ -49,7 +50,7 @@ def tune(
         raise InputError(f"--controller {controller!r}: one of {', '.join(CONTROLLER_FORMS)}")
     if plant_integration not in ("continuous", "euler"):
         raise InputError(f"--plant-integration {plant_integration!r}: continuous or euler")
-    plane = [a.strip().upper() for a in axes.split(",") if a.strip()] if axes else None
+    plane = list(parse_plane(axes)) if axes else None
     result, diff = tune_files(machine, controller=controller, ini=ini, gains=gain, propose=propose, programs=program,
                               ballbar=ballbar, radius=radius, feed=feed, axes=plane, u_max=u_max, json_out=json_out,
                               integration=plant_integration, lead_deg=lead_deg, recording=recording)

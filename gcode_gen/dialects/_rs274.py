@@ -4,9 +4,10 @@ from __future__ import annotations
 
 from core.errors import InputError
 from gcode_gen.dialects._common import coord, feed_per_min, header_comment, header_items
-from gcode_gen.program import Toolpath
+from gcode_gen.program import PLANE_CODES, Toolpath
 
 BLEND_TOLERANCE_MM = 0.01  # G64 P tolerance written when blending is asked
+_OFFSET_WORD = {"X": "I", "Y": "J", "Z": "K"}
 
 
 def write_rs274(
@@ -27,7 +28,8 @@ def write_rs274(
     body: list[str] = list(preamble)
     body.append(f"G64 P{BLEND_TOLERANCE_MM}" if toolpath.blending else exact_stop)
     last_feed: float | None = None
-    pos: dict[str, float] = {}  # current position, for the arc I/J offsets (relative to the arc start)
+    pos: dict[str, float] = {}  # current position, for the arc I/J/K offsets (relative to the arc start)
+    plane = "XY"  # the preamble's G17
     for b in toolpath.blocks:
         g = b.motion if not two_digit else f"G{int(b.motion[1:]):02d}"
         words = [g]
@@ -41,11 +43,14 @@ def write_rs274(
             if b.motion in ("G2", "G3"):
                 if b.center is None:
                     raise InputError(f"arc block without a centre in {toolpath.name}")
-                (a0, a1) = list(b.center)[:2]
-                if a0 not in pos or a1 not in pos:
+                if any(a not in pos for a in b.center):
                     raise InputError(f"arc in {toolpath.name} starts from an unknown position")
-                words.append(f"I{coord(b.center[a0] - pos[a0], d)}")
-                words.append(f"J{coord(b.center[a1] - pos[a1], d)}")
+                if b.plane != plane:
+                    words.insert(0, PLANE_CODES[b.plane])
+                    plane = b.plane
+                # I, J, K: the centre's offset from the arc's start along X, Y, Z, in any plane
+                words += [f"{_OFFSET_WORD[a]}{coord(b.center[a] - pos[a], d)}" for a in ("X", "Y", "Z")
+                          if a in b.center]
             pos.update(b.target)
             if b.motion != "G0" and b.feed is not None and b.feed != last_feed:
                 words.append(f"F{feed_per_min(b.feed)}")

@@ -55,6 +55,9 @@ def write(toolpath: Toolpath) -> str:
         if b.motion in ("G2", "G3"):
             if b.center is None:
                 raise InputError(f"arc block without a centre in {toolpath.name}")
+            if b.plane != "XY":  # the working plane follows the TOOL CALL's axis, which we do not write
+                raise InputError(f"{toolpath.name}: the Heidenhain writer writes arcs in the XY plane only, "
+                                 f"this one lies in {b.plane}; write it in the iso or linuxcnc dialect")
             body.append("CC " + " ".join(f"{ax}{coord(v, d, plus=True)}" for ax, v in b.center.items()))
             words = ["C", xyz, "DR+" if b.motion == "G3" else "DR-"]
         else:
