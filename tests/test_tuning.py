@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import subprocess
 import sys
 from dataclasses import replace
@@ -20,6 +21,7 @@ from core.errors import InputError
 from gcode_gen.toolpaths import circle
 from ident.synthetic_ballbar import ballbar_of_recording
 from ident.tuning import Gains, Criterion, TuningRefused, derive_plant, tune
+from agent.workflows.tune import tune_files
 from ident.tuning.ini import ini_diff, read_joint_gains
 from ident.tuning.margins import loop_margins, margins
 from ident.tuning.plant import Plant
@@ -144,8 +146,8 @@ def test_cli_refuses_with_one_error_line(tmp_path, identified):
 def test_ini_gains_and_diff_lines_exact(tmp_path):
     ini = tmp_path / "machine.ini"
     ini.write_text((ROOT / "fixtures/linuxcnc/machine.ini").read_text())
-    (j, g), = read_joint_gains(ini, ["X"]).values()
-    assert j == 0 and g.values["P"] == 10.0 and g.values["D"] == 0.14 and math.isinf(g.u_max)
+    (j, g, mm), = read_joint_gains(ini, ["X"]).values()
+    assert j == 0 and mm == 1.0 and g.values["P"] == 10.0 and g.values["D"] == 0.14 and math.isinf(g.u_max)
     diff = ini_diff(ini, {0: {"P": 42.5, "FF2": 0.001, "BACKLASH": 0.02}})
     # the fixture's [JOINT_0] lines (1-based): each changed key in place, a new key after the section's last key
     lines = ini.read_text().splitlines()
@@ -161,13 +163,37 @@ def test_ini_gains_and_diff_lines_exact(tmp_path):
     ]
 
 
-def test_the_gains_of_an_inch_machine_are_refused_not_read_as_per_mm(tmp_path):
-    # an inch machine's P is per inch: read as per mm it would be 25.4 times too stiff
-    ini = tmp_path / "machine.ini"
+def test_an_inch_machine_is_tuned_as_the_same_machine_in_mm_with_its_gains_per_inch(tmp_path):
+    """The fixture machine's INI, and the same machine with LINEAR_UNITS = inch and every gain
+    per inch: the same proposal, given per inch in the inch INI's diff."""
+    rec = virtual_cnc.simulate(gcode_gen.generate(["X"], seed=3), "fadal-pid", seed=3)
+    doc = json.loads(ident.identify(rec, diagnose=False).to_json())
+    doc["axes"]["X"]["virtual_model"]["effects"] = {"backlash": {"gap_mm": 0.02}}
+    (tmp_path / "result.json").write_text(json.dumps(doc))
     text = (ROOT / "fixtures/linuxcnc/machine.ini").read_text()
-    ini.write_text(text.replace("\n[TRAJ]\n", "\n[TRAJ]\nLINEAR_UNITS = inch\n", 1))  # the first of two counts
-    with pytest.raises(InputError, match="LINEAR_UNITS = inch: the tuner reads and writes pid gains of a machine in mm only"):
-        read_joint_gains(ini, ["X"])
+    (tmp_path / "mm.ini").write_text(text)
+    per_inch = {"P = 10.0": "P = 254.0", "I = 50.0": "I = 1270.0", "D = 0.14": "D = 3.556"}
+    for old, new in per_inch.items():
+        assert old in text
+        text = text.replace(old, new)
+    # the planner's limits in in/s and in/s² (mm ones read as inches would plan 25.4 times faster)
+    text = re.sub(r"^(\w*MAX_\w*(?:VELOCITY|ACCELERATION)) = (\S+)$",
+                  lambda m: f"{m.group(1)} = {float(m.group(2)) / 25.4!r}", text, flags=re.M)
+    (tmp_path / "inch.ini").write_text(text.replace("LINEAR_UNITS = mm", "LINEAR_UNITS = inch"))
+    gcode_gen.save_programs(gcode_gen.generate(["X"], seed=2, n_low=5, n_high=20), "linuxcnc", tmp_path / "part")
+    runs = {u: tune_files(tmp_path / "result.json", controller="linuxcnc-pid", ini=tmp_path / f"{u}.ini", gains=[],
+                          propose=[], programs=[tmp_path / "part/ident_high.ngc"], ballbar=False, radius=100.0,
+                          feed=1000.0 / 60.0, axes=None, u_max=math.inf, json_out=None)
+            for u in ("mm", "inch")}
+    (mm, _), (inch, diff) = runs["mm"], runs["inch"]
+    assert inch.predicted_after == pytest.approx(mm.predicted_after, rel=1e-6)
+    for k, v in mm.after["X"].values.items():
+        scale = {"DEADBAND": 1 / 25.4, "BACKLASH": 1 / 25.4, "BIAS": 1.0, "MAX_OUTPUT": 1.0}.get(k, 25.4)
+        assert inch.after["X"].values[k] == pytest.approx(v * scale, rel=1e-6, abs=1e-12), k
+    assert inch.before["X"].values["P"] == pytest.approx(254.0)
+    assert "+BACKLASH = 0.000787402" in diff  # 0.02 mm
+    p = next(ln for ln in diff if ln.startswith("+P = "))
+    assert float(p[5:]) == pytest.approx(25.4 * mm.after["X"].values["P"], rel=1e-5)
 
 
 def _tuned_machine(machine, gains):

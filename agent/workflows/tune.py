@@ -70,16 +70,20 @@ def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Seque
     else:
         test = Criterion.program(vm, programs)
     joints: dict[str, int] = {}
+    units: dict[str, float] = {}  # mm per machine unit of each axis's gains (LinuxCNC INI)
     if controller == "linuxcnc-pid":
         if ini is None:
             raise InputError.about("ini", "--controller linuxcnc-pid reads the gains from the machine's INI: give --ini")
-        from ident.tuning.ini import read_joint_gains
+        from ident.tuning.ini import in_mm, read_joint_gains
 
         read = read_joint_gains(ini, list(test.axes))
-        current = {a: g for a, (_, g) in read.items()}
-        joints = {a: j for a, (j, _) in read.items()}
+        joints = {a: j for a, (j, _, _) in read.items()}
+        # The INI's gains, and those given with --gain and --propose, are per machine unit (per
+        # inch on an inch machine); the tuning works per mm, as the identified drives do.
+        units = {a: mm for a, (_, _, mm) in read.items()}
         extra = parse_gains(controller, test.axes, gains, "--gain")
-        current = {a: Gains(controller, {**g.values, **extra[a]}, g.u_max) for a, g in current.items()}
+        current = {a: in_mm(Gains(controller, {**g.values, **extra[a]}, g.u_max), units[a])
+                   for a, (_, g, _) in read.items()}
     else:
         if ini is not None:
             raise InputError.about("ini", f"--ini holds LinuxCNC pid gains; --controller {controller} takes --gain")
@@ -93,9 +97,16 @@ def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Seque
     proposed = None
     if propose:
         changes = parse_gains(controller, test.axes, propose, "--propose")
-        proposed = {a: Gains(controller, {**current[a].values, **changes[a]}, current[a].u_max) for a in test.axes}
+        proposed = {a: _with(current[a], changes[a], units.get(a, 1.0)) for a in test.axes}
     rec = load_recording(recording) if recording is not None else None
     result = tune(vm, current, test, proposed, integration, rec)
+    if any(mm != 1.0 for mm in units.values()):
+        from ident.tuning.ini import in_machine_units
+
+        result = replace(result, before={a: in_machine_units(g, units[a]) for a, g in result.before.items()},
+                         after={a: in_machine_units(g, units[a]) for a, g in result.after.items()},
+                         notes=result.notes + ("gains in the INI's units (per inch on a linear joint); the tuning "
+                                               "converts them to mm, as the identified drives are",))
     if rec is None:
         source = _named_recording(machine)
         if source is not None:
@@ -120,6 +131,15 @@ def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Seque
         doc["ini_diff"] = diff
         write_json(json.dumps(doc, indent=2, allow_nan=False), json_out)
     return result, diff
+
+
+def _with(g: Gains, changes: dict[str, float], mm: float) -> Gains:
+    """``g`` (per mm) with ``changes`` given per machine unit of ``mm`` mm applied."""
+    if mm == 1.0:
+        return Gains(g.form, {**g.values, **changes}, g.u_max)
+    from ident.tuning.ini import in_machine_units, in_mm
+
+    return in_mm(Gains(g.form, {**in_machine_units(g, mm).values, **changes}, g.u_max), mm)
 
 
 def _named_recording(machine: Path) -> str | None:

@@ -18,20 +18,36 @@ from core.errors import InputError
 from core.linuxcnc_ini import KEY_LINE, linear_units_mm, sections
 from ident.tuning.controllers import GAIN_NAMES, Gains
 
-__all__ = ["read_joint_gains", "ini_diff", "format_value"]
+__all__ = ["read_joint_gains", "ini_diff", "format_value", "in_mm", "in_machine_units"]
 
-def read_joint_gains(path: str | Path, axes: list[str]) -> dict[str, tuple[int, Gains]]:
-    """{axis: (joint number, Gains("linuxcnc-pid"))} for the ``axes`` of a result, from the INI."""
+#: The power of the length unit in each pid gain: a gain per unit of error (P, I, D and the
+#: feed-forwards, per unit of command) scales as 1/length, a length (DEADBAND, BACKLASH) as
+#: length; BIAS and MAX_OUTPUT are in the output's units.
+_LENGTH_POWER = {"P": -1, "I": -1, "D": -1, "FF0": -1, "FF1": -1, "FF2": -1, "DEADBAND": 1, "BACKLASH": 1,
+                 "BIAS": 0, "MAX_OUTPUT": 0}
+
+
+def in_mm(g: Gains, mm: float) -> Gains:
+    """LinuxCNC pid gains of a joint whose unit is ``mm`` mm (25.4: inch) → the same gains per mm."""
+    return Gains(g.form, {k: v * mm ** _LENGTH_POWER[k] for k, v in g.values.items()}, g.u_max)
+
+
+def in_machine_units(g: Gains, mm: float) -> Gains:
+    """The inverse of :func:`in_mm`: gains per mm → per machine unit of ``mm`` mm."""
+    return in_mm(g, 1.0 / mm)
+
+def read_joint_gains(path: str | Path, axes: list[str]) -> dict[str, tuple[int, Gains, float]]:
+    """{axis: (joint number, Gains("linuxcnc-pid"), mm per unit)} for the ``axes`` of a result,
+    from the INI.  The gains are as the INI gives them, per machine unit: ``[TRAJ]
+    LINEAR_UNITS`` for a linear joint (mm per unit 25.4 on an inch machine), degrees for a
+    joint of ``TYPE = ANGULAR`` (1); :func:`in_mm` converts them."""
     path = Path(path)
     try:
         lines = path.read_text().splitlines()
     except OSError as exc:
         raise InputError.about("ini", f"{path}: cannot read ({exc.strerror or exc})") from None
     secs = sections(lines)
-    if linear_units_mm(secs, path) != 1.0:
-        # the pid's gains are per machine unit, the models' per mm: converted both ways or not at all
-        raise InputError.about("ini", f"{path}: [TRAJ] LINEAR_UNITS = {secs['TRAJ']['LINEAR_UNITS'][1]}: the tuner "
-                                      f"reads and writes pid gains of a machine in mm only")
+    mm = linear_units_mm(secs, path)
     coords = (secs.get("TRAJ", {}).get("COORDINATES", (0, ""))[1]).replace(" ", "").upper()
     if not coords:
         raise InputError.about("ini", f"{path}: no [TRAJ]COORDINATES: which joint drives which axis?")
@@ -54,7 +70,8 @@ def read_joint_gains(path: str | Path, axes: list[str]) -> dict[str, tuple[int, 
         if "P" not in vals:
             raise InputError.about("ini", f"{path}: [JOINT_{j}] has no P gain (is the loop a pid?)")
         mo = vals.get("MAX_OUTPUT", 0.0)
-        out[a] = (j, Gains("linuxcnc-pid", vals, u_max=mo if mo > 0 else math.inf))
+        angular = sec.get("TYPE", (0, "LINEAR"))[1].split("#")[0].strip().upper() == "ANGULAR"
+        out[a] = (j, Gains("linuxcnc-pid", vals, u_max=mo if mo > 0 else math.inf), 1.0 if angular else mm)
     return out
 
 
