@@ -17,13 +17,15 @@ from typing import Any
 
 from core.errors import InputError
 from core.linuxcnc_ini import linear_units_mm, read_sections
+from gcode_gen.program import ROTARY_AXES
 
 __all__ = ["PlannerLimits", "read_linuxcnc_ini"]
 
 
 @dataclass(frozen=True)
 class PlannerLimits:
-    """Per-axis (max velocity mm/s, max acceleration mm/s²), the path speed cap (mm/s), and their source."""
+    """Per-axis (max velocity mm/s, max acceleration mm/s²; deg/s, deg/s² for A, B, C), the path
+    speed cap (mm/s), and their source."""
 
     axes: dict[str, tuple[float, float]]
     max_linear_velocity: float | None
@@ -31,7 +33,8 @@ class PlannerLimits:
 
     def describe(self) -> str:
         """One line: the planner and its limits."""
-        axes = ", ".join(f"{a} {v:g} mm/s {acc:g} mm/s²" for a, (v, acc) in self.axes.items())
+        unit = {a: "deg" if a in ROTARY_AXES else "mm" for a in self.axes}
+        axes = ", ".join(f"{a} {v:g} {unit[a]}/s {acc:g} {unit[a]}/s²" for a, (v, acc) in self.axes.items())
         cap = f", path ≤ {self.max_linear_velocity:g} mm/s" if self.max_linear_velocity else ""
         return f"LinuxCNC planner, per-axis limits from {self.source}: {axes}{cap}"
 
@@ -83,7 +86,7 @@ def read_linuxcnc_ini(path: str | Path) -> PlannerLimits:
         if not v or not a:
             raise InputError(f"{path}: axis {letter} has no MAX_VELOCITY/MAX_ACCELERATION in [AXIS_{letter}] or [JOINT_{j}]")
         old = axes.get(letter, (math.inf, math.inf))
-        k = 1.0 if letter in "ABC" else mm  # a rotary axis is in ANGULAR_UNITS
+        k = 1.0 if letter in ROTARY_AXES else mm  # a rotary axis is in ANGULAR_UNITS
         axes[letter] = (min(k * min(v), old[0]), min(k * min(a), old[1]))
     cap = _number(secs, "TRAJ", "MAX_LINEAR_VELOCITY", path)
     return PlannerLimits(axes, None if cap is None else mm * cap, path.name)

@@ -20,10 +20,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-__all__ = ["AXIS_LETTERS", "MOTIONS", "ARC_ORDER", "ARC_PLANES", "PLANE_CODES", "Block", "Program", "Toolpath"]
+__all__ = ["AXIS_LETTERS", "ROTARY_AXES", "MOTIONS", "ARC_ORDER", "ARC_PLANES", "PLANE_CODES", "Block", "Program", "Toolpath"]
 
 #: Axis letters the generator, writers and interpreter accept.
 AXIS_LETTERS: tuple[str, ...] = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
+#: The rotary ones, in degrees.
+ROTARY_AXES: frozenset[str] = frozenset("ABC")
 
 #: Each arc plane's (first, second) axes: G3 turns from the first towards the second (ccw
 #: seen from the third axis's +), as RS274/NGC counts it.

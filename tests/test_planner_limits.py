@@ -16,7 +16,7 @@ from agent import cli
 from core.errors import InputError
 from gcode_gen.interpolator import interpolate
 from gcode_gen.interpreter import parse_program
-from gcode_gen.planner_limits import read_linuxcnc_ini
+from gcode_gen.planner_limits import PlannerLimits, read_linuxcnc_ini
 
 cli._register()
 ROOT = Path(__file__).resolve().parent.parent
@@ -70,6 +70,11 @@ def test_the_test_machines_ini_gives_its_axis_limits():
     assert lim.axes == {"X": (200.0, 2000.0)}  # the one-axis machine: [TRAJ] COORDINATES = X
     assert lim.max_linear_velocity == 200.0
     assert "machine.ini" in lim.describe() and "2000 mm/s²" in lim.describe()
+
+
+def test_a_rotary_axis_limits_are_told_in_degrees():
+    lim = PlannerLimits({"X": (100.0, 1000.0), "A": (360.0, 3600.0)}, None, "m.ini")
+    assert lim.describe().endswith("X 100 mm/s 1000 mm/s², A 360 deg/s 3600 deg/s²")
 
 
 def test_an_ini_without_limits_is_one_line(tmp_path):
