@@ -15,7 +15,7 @@ from pathlib import Path
 
 from core.errors import InputError
 
-__all__ = ["sections", "read_sections", "linear_units_mm", "KEY_LINE"]
+__all__ = ["sections", "read_sections", "linear_units_mm", "joint_unit", "KEY_LINE"]
 
 _SECTION = re.compile(r"^\s*\[([^\]]+)\]\s*$")
 #: a key line: (indent, key, " = ", value), the parts kept so that a line can be rewritten
@@ -85,3 +85,10 @@ def linear_units_mm(secs: dict[str, dict[str, tuple[int, str]]], path: str | Pat
         raise InputError.about("ini", f"{path}: [TRAJ] LINEAR_UNITS = {word!r}: LinuxCNC knows "
                                       f"{', '.join(_LINEAR_UNITS)} or a number of units per mm")
     return 1.0 / per_mm
+
+
+def joint_unit(secs: dict[str, dict[str, tuple[int, str]]], joint: int, path: str | Path) -> tuple[float, str]:
+    """(factor to the recorded unit, that unit) of joint ``joint``'s positions and gains: a
+    linear joint in mm (:func:`linear_units_mm`), one of ``[JOINT_n] TYPE = ANGULAR`` in degrees (1)."""
+    kind = secs.get(f"JOINT_{joint}", {}).get("TYPE", (0, "LINEAR"))[1].split("#")[0].strip().upper()
+    return (1.0, "deg") if kind == "ANGULAR" else (linear_units_mm(secs, path), "mm")

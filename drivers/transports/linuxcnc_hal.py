@@ -53,7 +53,7 @@ import subprocess
 from pathlib import Path
 
 from core.errors import InputError, TransportError
-from core.linuxcnc_ini import linear_units_mm, read_sections
+from core.linuxcnc_ini import joint_unit, read_sections
 from drivers.base import Driver, Sample, StreamInfo
 from drivers.url import PortURL
 
@@ -190,14 +190,10 @@ class LinuxCNCDriver(Driver):
             return [1.0] * n, ("mm",) * n, "default: mm (the INI LinuxCNC was started with was not found)"
         try:
             secs = read_sections(ini)
-            mm = linear_units_mm(secs, ini)
+            per_joint = [joint_unit(secs, j, ini) for j in self.joints]
         except InputError as exc:
             return [1.0] * n, ("mm",) * n, f"default: mm ({exc})"
-        kinds = [secs.get(f"JOINT_{j}", {}).get("TYPE", (0, "LINEAR"))[1].split("#")[0].strip().upper()
-                 for j in self.joints]
-        scales = [1.0 if k == "ANGULAR" else mm for k in kinds]
-        units = tuple("deg" if k == "ANGULAR" else "mm" for k in kinds)
-        return scales, units, f"{ini}: [TRAJ] LINEAR_UNITS, [JOINT_n] TYPE"
+        return [k for k, _ in per_joint], tuple(u for _, u in per_joint), f"{ini}: [TRAJ] LINEAR_UNITS, [JOINT_n] TYPE"
 
     def _thread_period(self) -> float:
         for line in self._hal("show", "thread").splitlines():

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Mapping
 
 from core.errors import InputError
-from core.linuxcnc_ini import KEY_LINE, linear_units_mm, sections
+from core.linuxcnc_ini import KEY_LINE, joint_unit, sections
 from ident.tuning.controllers import GAIN_NAMES, Gains
 
 __all__ = ["read_joint_gains", "ini_diff", "format_value", "in_mm", "in_machine_units"]
@@ -47,7 +47,6 @@ def read_joint_gains(path: str | Path, axes: list[str]) -> dict[str, tuple[int, 
     except OSError as exc:
         raise InputError.about("ini", f"{path}: cannot read ({exc.strerror or exc})") from None
     secs = sections(lines)
-    mm = linear_units_mm(secs, path)
     coords = (secs.get("TRAJ", {}).get("COORDINATES", (0, ""))[1]).replace(" ", "").upper()
     if not coords:
         raise InputError.about("ini", f"{path}: no [TRAJ]COORDINATES: which joint drives which axis?")
@@ -70,8 +69,7 @@ def read_joint_gains(path: str | Path, axes: list[str]) -> dict[str, tuple[int, 
         if "P" not in vals:
             raise InputError.about("ini", f"{path}: [JOINT_{j}] has no P gain (is the loop a pid?)")
         mo = vals.get("MAX_OUTPUT", 0.0)
-        angular = sec.get("TYPE", (0, "LINEAR"))[1].split("#")[0].strip().upper() == "ANGULAR"
-        out[a] = (j, Gains("linuxcnc-pid", vals, u_max=mo if mo > 0 else math.inf), 1.0 if angular else mm)
+        out[a] = (j, Gains("linuxcnc-pid", vals, u_max=mo if mo > 0 else math.inf), joint_unit(secs, j, path)[0])
     return out
 
 
