@@ -304,6 +304,7 @@ def test_nothing_listening_is_a_transport_error():
         ("modbus-tcp://127.0.0.1:5020?mode=fast", "mode='fast'"),
         ("modbus-tcp://127.0.0.1:5020?speed=2", "unknown option 'speed'"),
         ("modbus-tcp://127.0.0.1:5020?unit=one", "unit='one' is not a valid int"),
+        ("modbus-tcp://127.0.0.1:5020?unit=300", "unit=300; a Modbus unit id is 0..247"),
         ("modbus-tcp://127.0.0.1:5020?timeout=0", "timeout=0.0 must be > 0 s"),
         ("modbus-rtu:///dev/ttyUSB0?parity=X", "parity='X'"),
     ],

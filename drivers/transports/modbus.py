@@ -142,6 +142,8 @@ class ModbusDriver(Driver):
         self.unit_option = url.option("unit", int)
         self.mode_option = url.option("mode", str)
         self.map_path = url.option("map", str)
+        if self.unit_option is not None and not 0 <= self.unit_option <= 247:
+            raise InputError.about("port", f"{url.raw}: unit={self.unit_option}; a Modbus unit id is 0..247")
         if self.mode_option is not None and self.mode_option not in ("trace", "live"):
             raise InputError.about("port", f"{url.raw}: mode={self.mode_option!r}; use trace or live")
         for name, value in (("timeout", self.timeout), ("reconnect_s", self.reconnect_s)):
