@@ -173,5 +173,5 @@ def test_a_linuxcnc_sample_program_is_predicted_as_the_three_axis_machine_runs_i
           f"rms diff {s['rms_difference_ratio']:.3f}, cycle {c['measured_cycle_time_s']:.3f} / "
           f"{c['predicted_cycle_time_s']:.3f} s")
     assert abs(s["max_ratio"] - 1) <= 0.05
-    assert s["rms_difference_ratio"] <= (0.15 if blending else 0.10)
+    assert s["rms_difference_ratio"] <= 0.10
     assert c["predicted_cycle_time_s"] == pytest.approx(c["measured_cycle_time_s"], rel=0.01)
