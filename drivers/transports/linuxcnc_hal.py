@@ -144,13 +144,13 @@ class LinuxCNCDriver(Driver):
         if shutil.which("halcmd") is None or shutil.which("halsampler") is None:
             raise TransportError("LinuxCNC is not installed here (no halcmd/halsampler on PATH); "
                                  "capture with linuxcnc:// on the computer that runs LinuxCNC")
-        rtapi = _rtapi_process()
-        if rtapi is None:
+        rtapi = _rtapi_processes()
+        if not rtapi:
             raise TransportError("LinuxCNC is not running (no rtapi_app process); start LinuxCNC, then capture")
-        owner = rtapi[1]
+        owner = rtapi[0][1]  # the realtime master's user
         if os.geteuid() == 0 and owner != 0:
             self._user = pwd.getpwuid(owner)
-        scales, units, units_from = self._joint_units(_running_ini())
+        scales, units, units_from = self._joint_units(_running_ini(rtapi))
         self._scales = [f for f in scales for _ in (0, 1)]  # commanded and actual columns
         self._period = self._thread_period()
         pins = self._check_pins()
@@ -359,12 +359,6 @@ def _rtapi_processes() -> list[tuple[int, int]]:
     return [(pid, uid) for _, pid, uid in sorted(found)]
 
 
-def _rtapi_process() -> tuple[int, int] | None:
-    """(pid, uid) of the realtime master ``rtapi_app``, None if LinuxCNC is not running."""
-    procs = _rtapi_processes()
-    return procs[0] if procs else None
-
-
 def _started_with_ini(pid: int) -> Path | None:
     """The INI file the process ``pid`` was started with (``INI_FILE_NAME`` in its
     environment, relative to its working directory), None if it has none or we may not read it."""
@@ -382,9 +376,10 @@ def _started_with_ini(pid: int) -> Path | None:
     return path if path.is_file() else None
 
 
-def _running_ini() -> Path | None:
-    """The INI the running LinuxCNC was started with: from the oldest ``rtapi_app`` that has one."""
-    for pid, _ in _rtapi_processes():
+def _running_ini(rtapi: list[tuple[int, int]]) -> Path | None:
+    """The INI the running LinuxCNC was started with: from the oldest of the ``rtapi_app``
+    processes ``rtapi`` (:func:`_rtapi_processes`) that has one."""
+    for pid, _ in rtapi:
         ini = _started_with_ini(pid)
         if ini is not None:
             return ini
