@@ -345,8 +345,8 @@ def compare(machine: VirtualMachine, recording: Recording, run: CommandedRun | N
     :func:`block_of_samples`, so both errors are taken over the same feed moves as a
     prediction's.  With ``run`` (the program as this machine's planner interpolates it)
     the figures of the stand-alone prediction are added: its contour error on its own
-    planned command against the measured one, block by block from each block's first
-    moving sample, and both cycle times.  Without ``run`` every moving sample counts.
+    planned command against the measured one, paired at the same point of the path
+    (:func:`_standalone`), and both cycle times.  Without ``run`` every moving sample counts.
     """
     axes = [a for a in recording.axes if a in machine.axes]
     if len(axes) < 2:
@@ -372,15 +372,29 @@ def compare(machine: VirtualMachine, recording: Recording, run: CommandedRun | N
     mask = _feed_moves(run, cmd, labels)
     if not mask.any():
         raise ValueError("its command does not run the program's feed moves (another program, or another start?)")
-    standalone = _standalone(machine, run, axes, measured, mask, labels)
+    standalone = _standalone(machine, run, cmd, measured, mask, labels)
     return Comparison(source, recording.t, measured, predicted, mask,
                       cycle_time_s(run, cmd, labels, recording.sample_period), cycle_time_s(run), standalone)
 
 
-def _standalone(machine: VirtualMachine, run: CommandedRun, axes: list[str], measured: np.ndarray,
+def _travel(commanded: dict[str, np.ndarray], axes: list[str]) -> np.ndarray:
+    """(N,) the command's travel along its path from the first sample, mm (every axis in ``axes``)."""
+    X = np.column_stack([commanded[a] for a in axes])
+    return np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(X, axis=0), axis=1))))
+
+
+def _standalone(machine: VirtualMachine, run: CommandedRun, recorded: dict[str, np.ndarray], measured: np.ndarray,
                 mask: np.ndarray, labels: tuple[np.ndarray, np.ndarray]) -> dict[str, float] | None:
-    """The prediction on the planned command vs ``measured``: max and rms ratios, samples
-    paired block by block from each feed block's first moving sample."""
+    """The prediction on the planned command vs ``measured``: max and rms ratios.
+
+    Each measured feed sample is paired with the prediction at the same point of the path:
+    block by block, the predicted contour error interpolated at the recorded command's travel
+    along the path (:func:`_travel`, from the run's start).  Paired by sample number from
+    each block's start instead, the two carry up to a sample of the phase between the
+    controller's clock and the plan, which on a blended corner, where the contour error
+    changes fastest, moves the rms difference between runs of the same machine.
+    """
+    axes = list(recorded)
     if any(a not in run.commanded for a in axes):
         return None
     cmd = {a: run.commanded[a] for a in axes}
@@ -390,15 +404,20 @@ def _standalone(machine: VirtualMachine, run: CommandedRun, axes: list[str], mea
     # arc splits where it comes nearest the corner)
     own_labels = block_of_samples(run, cmd)
     own_mask = _feed_moves(run, cmd, own_labels)
+    s_m, s_p = _travel(recorded, axes), _travel(cmd, axes)
     key_m = labels[0] * 1_000_000 + labels[1]
     key_p = own_labels[0] * 1_000_000 + own_labels[1]
     m_parts, p_parts = [], []
     for key in dict.fromkeys(key_p[own_mask]):
         km = np.flatnonzero(mask & (key_m == key))
         kp = np.flatnonzero(own_mask & (key_p == key))
-        n = min(km.size, kp.size)
-        m_parts.append(measured[km[:n]])
-        p_parts.append(own[kp[:n]])
+        if km.size == 0 or kp.size < 2:
+            continue
+        # travel grows strictly while the command moves (the feed mask): the measured samples
+        # inside the predicted block's span of travel are paired, none extrapolated
+        inside = km[(s_m[km] >= s_p[kp[0]]) & (s_m[km] <= s_p[kp[-1]])]
+        m_parts.append(measured[inside])
+        p_parts.append(np.interp(s_m[inside], s_p[kp], own[kp]))
     if not m_parts:
         return None
     m, p = np.concatenate(m_parts), np.concatenate(p_parts)
