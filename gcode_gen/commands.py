@@ -157,8 +157,11 @@ def command_programs(
                 raise MachineError(f"{name}:{block.line}: moves axis {sorted(unknown)[0]}, "
                                    f"{machine_name} has axes {', '.join(axes)}")
             moved |= set(block.target)
-        traj = interpolate(program, Ts=Ts, a_max=a_max, j_max=j_max, rapid_feed=rapid_feed, start=dict(start),
-                           axis_limits=axis_limits)
+        try:
+            traj = interpolate(program, Ts=Ts, a_max=a_max, j_max=j_max, rapid_feed=rapid_feed, start=dict(start),
+                               axis_limits=axis_limits)
+        except InputError as exc:  # the interpolator names the line; the program's name added
+            raise InputError(f"{name}: {exc}") from None
         part = {}
         for a in axes:
             x = np.asarray(traj.axes.get(a, np.full(traj.t.shape, start[a])), dtype=float)

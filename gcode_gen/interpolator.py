@@ -252,6 +252,9 @@ def _segments(program: Program, names: list[str], p: np.ndarray, a_max: float, r
         q = p.copy()
         for ax, value in b.target.items():
             q[index[ax]] = value
+            if axis_limits and ax not in axis_limits and value != p[index[ax]]:
+                raise InputError(f"line {b.line}: moves axis {ax}, for which the per-axis limits give no "
+                                 f"velocity and acceleration (limits for {', '.join(axis_limits)})")
         if b.motion == "G0":
             feed = rapid_feed
         else:
@@ -336,7 +339,8 @@ def _append_blended(chain: _Segment, sg: _Segment, amax: np.ndarray) -> None:
     elif interior < 1e-6:  # a reversal cannot be blended
         d = R = 0.0
     else:
-        R = tol * math.sin(theta) / (1.0 - math.sin(theta))
+        # 1 − sin θ as 2·sin²(π/4 − θ/2): for a corner within 1e-8 of straight, sin θ rounds to 1
+        R = tol * math.sin(theta) / (2.0 * math.sin(0.25 * math.pi - 0.5 * theta) ** 2)
         d = min(R / math.tan(theta), 0.5 * L0, 0.5 * sg.L)
         R = d * math.tan(theta)
     moving = (np.abs(u1) > 1e-12) | (np.abs(u2) > 1e-12)

@@ -212,7 +212,9 @@ class VirtualMachine:
     def _check_limits(self, run: CommandedRun) -> None:
         for p, blocks in enumerate(run.blocks):
             for line, b in sorted(blocks.items()):
-                if b.motion != "G0" and b.feed is not None and b.feed > self.max_feed * (1 + 1e-9):
+                # (LinuxCNC's planner lowers a feed above its limits to them, as the controller does)
+                if (self.planner_limits is None and b.motion != "G0" and b.feed is not None
+                        and b.feed > self.max_feed * (1 + 1e-9)):
                     raise MachineError(f"{run.programs[p]['name']}:{line}: feed {b.feed:g} mm/s is above "
                                        f"{self.name}'s maximum feed {self.max_feed:g} mm/s")
         for axis, (lo, hi) in self.travel.items():

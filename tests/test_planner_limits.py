@@ -123,17 +123,29 @@ def result_json(tmp_path_factory):
     return path
 
 
+def _xy_ini(tmp_path: Path) -> Path:
+    """The test machine's INI with X and Y, as fixtures/linuxcnc/machine.py writes it for ``--axes XY``."""
+    text = (ROOT / "fixtures/linuxcnc/machine.ini").read_text()
+    for old, new in (("COORDINATES = X\n", "COORDINATES = X Y\n"), ("JOINTS = 1\n", "JOINTS = 2\n"),
+                     ("coordinates=X\n", "coordinates=XY\n")):
+        assert old in text
+        text = text.replace(old, new)
+    ini = tmp_path / "machine.ini"
+    ini.write_text(text)
+    return ini
+
+
 def test_predict_says_which_planner_and_limits_it_used_and_the_cycle_time(result_json, tmp_path):
     prog = tmp_path / "diamond.ngc"
     prog.write_text(gcode_gen.write(gcode_gen.diamond(size=20, feed=100), "linuxcnc"))
     out = tmp_path / "p.json"
     res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), "--ini",
-                                       str(ROOT / "fixtures/linuxcnc/machine.ini"), "--json", str(out)])
+                                       str(_xy_ini(tmp_path)), "--json", str(out)])
     assert res.exit_code == 0, res.output
-    assert "planner: LinuxCNC planner, per-axis limits from machine.ini: X 200 mm/s 2000 mm/s²" in res.output
+    assert ("planner: LinuxCNC planner, per-axis limits from machine.ini: X 200 mm/s 2000 mm/s², "
+            "Y 200 mm/s 2000 mm/s²") in res.output
     doc = json.loads(out.read_text())["machines"][0]
     assert doc["planner"]["kind"] == "per-axis" and doc["planner"]["source"] == "machine.ini"
-    # the test machine's INI is the one-axis machine's: Y is unlimited, X at 2000 mm/s²
     assert doc["cycle_time_s"] > 0.2
     plain = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
     assert "planner: path-limited planner (2000 mm/s² along the path" in plain.output
@@ -150,7 +162,7 @@ def test_a_bad_ini_is_a_one_line_error_with_exit_2(result_json, tmp_path):
 
 def test_blending_the_planner_does_not_model_is_predicted_as_exact_stop_with_a_warning(result_json, tmp_path):
     prog = tmp_path / "blend.ngc"
-    ini = ["--ini", str(ROOT / "fixtures/linuxcnc/machine.ini")]
+    ini = ["--ini", str(_xy_ini(tmp_path))]
     prog.write_text("G21 G90 G17 G94\nG64 P0.01 (blend)\nG0 X0 Y0\nG1 X10 Y0 F3000\nG1 X10 Y10\nM2\n")
     res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
     assert res.exit_code == 0, res.output
@@ -186,3 +198,40 @@ def test_g64_p_blends_a_corner_with_an_arc_through_the_tolerance(P):
     # the last line ends without a blend: LinuxCNC runs it at half its acceleration (2828/2)
     acc = np.diff(v[-60:]) / tr.Ts
     assert acc.min() == pytest.approx(-1414.0, rel=0.03)
+
+
+def test_a_program_moving_an_axis_the_ini_does_not_have_is_refused_naming_it(result_json, tmp_path):
+    """LinuxCNC configured by an INI without Y does not move Y: neither does its planner here
+    (an axis without limits would be planned at infinite acceleration)."""
+    prog = tmp_path / "y.ngc"
+    prog.write_text("G21 G90 G17 G94\nG0 X0 Y0\nG1 X10 F3000\nG1 Y10\nM2\n")
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), "--ini",
+                                       str(ROOT / "fixtures/linuxcnc/machine.ini")])
+    assert res.exit_code == 2
+    lines = res.output.strip().splitlines()
+    assert lines == ["error: y.ngc: line 4: moves axis Y, for which the per-axis limits give no velocity and "
+                     "acceleration (limits for X)"], res.output
+
+
+def test_under_the_ini_a_feed_above_the_limits_is_lowered_to_them_as_linuxcnc_does(result_json, tmp_path):
+    """A sample program's F1000000 runs at the path speed cap ([TRAJ] MAX_LINEAR_VELOCITY)."""
+    prog = tmp_path / "fast.ngc"
+    prog.write_text("G21 G90 G17 G94\nG0 X0 Y0\nG1 X20 F1000000\nM2\n")
+    out = tmp_path / "p.json"
+    res = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json), "--ini",
+                                       str(_xy_ini(tmp_path)), "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    plain = CliRunner().invoke(cli.app, ["predict", str(prog), "--machine", str(result_json)])
+    assert plain.exit_code == 2 and "above result.json's maximum feed 200 mm/s" in plain.output
+
+
+def test_a_blended_corner_within_rounding_of_straight_is_planned():
+    """Two G1 lines under G64 P whose directions differ by 1.5e-8 rad, as a sample program's
+    3-decimal coordinates give them (LinuxCNC's 3D_Chips.ngc): the sine of half the corner's
+    interior angle rounds to 1, and the blend's radius is still planned, not a division by zero."""
+    prog = parse_program("G21 G90 G17 G94\nG64 P0.1\nG0 X20.696 Y-3.724 Z17.861\nG1 X-25.968 Y-8.569 Z-20.918 F6000\n"
+                         "G1 X-33.336 Y-9.334 Z-27.041\nM2\n", name="s.ngc")
+    tr = interpolate(prog, axis_limits={**LIMITS, "Z": (200.0, 2000.0)}, rapid_feed=200.0,
+                     start={"X": 20.696, "Y": -3.724, "Z": 17.861})
+    assert all(np.isfinite(x).all() for x in tr.axes.values())
+    assert (tr.axes["X"][-1], tr.axes["Y"][-1], tr.axes["Z"][-1]) == pytest.approx((-33.336, -9.334, -27.041))
