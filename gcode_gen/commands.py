@@ -50,6 +50,9 @@ class CommandedRun:
     programs : per program ``{"name", "sha256"}``.
     blocks : per program, its parsed blocks (line number -> Block), for the geometry of
         the path (arc centres) and for naming places by line.
+    repeated_lines : per program, the lines executed more than once as different blocks (a
+        loop, a subroutine called with other arguments): ``blocks`` holds their last
+        execution, so their geometry is not the one of every sample labelled with them.
     """
 
     t: np.ndarray
@@ -60,6 +63,7 @@ class CommandedRun:
     programs: tuple[dict[str, str], ...]
     blocks: tuple[dict[int, Block], ...]
     texts: tuple[str, ...] = ()
+    repeated_lines: tuple[frozenset[int], ...] = ()
 
     @property
     def axes(self) -> list[str]:
@@ -143,14 +147,21 @@ def command_programs(
         raise InputError("no program given")
     start = {a: float((start or {}).get(a, 0.0)) for a in axes}
     parts: list[dict[str, np.ndarray]] = []
-    segments, lines, info, texts, blocks = [], [], [], [], []
+    segments, lines, info, texts, blocks, repeated = [], [], [], [], [], []
     moved: set[str] = set()
     n_settle = int(round(settle_s / Ts))
     for index, item in enumerate(programs):
         name, text, program = load_program(item)
         info.append({"name": name, "sha256": hashlib.sha256(text.encode()).hexdigest()})
         texts.append(text)
-        blocks.append({b.line: b for b in program.blocks})
+        by_line: dict[int, Block] = {}
+        again: set[int] = set()
+        for b in program.blocks:
+            if by_line.get(b.line, b) != b:
+                again.add(b.line)
+            by_line[b.line] = b
+        blocks.append(by_line)
+        repeated.append(frozenset(again))
         for block in program.blocks:
             unknown = set(block.target) - set(axes)
             if unknown:
@@ -183,5 +194,6 @@ def command_programs(
         Ts=float(Ts),
         programs=tuple(info),
         blocks=tuple(blocks),
+        repeated_lines=tuple(repeated),
         texts=tuple(texts),
     )

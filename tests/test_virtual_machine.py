@@ -151,6 +151,19 @@ def test_an_arc_outside_the_xy_plane_counts_as_the_path_it_draws(pid_result, tmp
     assert s.contour_max_mm <= err[s.feed_move].max() + 1e-9
 
 
+def test_an_arc_line_run_in_a_loop_is_measured_against_each_run_of_it(pid_result, tmp_path):
+    """One program line that runs as three circles about three centres (an o-word loop, as
+    LinuxCNC's useful-subroutines.ngc cuts its slots): every circle's contour error is its own,
+    not the distance to the last circle the line drew (40 mm here before)."""
+    vm = ident.VirtualMachine.from_result(pid_result, "pid.json")
+    prog = tmp_path / "loop.ngc"
+    prog.write_text("G21 G90 G17 G61.1\nG0 X0 Y0\n#1 = 0\no100 while [#1 LT 3]\nG1 X[#1 * 20] Y0 F3000\n"
+                    "G3 X[#1 * 20] Y0 I5 J0\n#1 = [#1 + 1]\no100 endwhile\nM2\n")
+    s = analyse(vm.run([prog]))
+    err = np.sqrt(sum(s.prediction.recording.axes[a].tracking_error ** 2 for a in "XY"))
+    assert 0 < s.contour_max_mm <= err[s.feed_move].max() + 1e-9
+
+
 def test_contour_error_near_the_end_of_a_closed_path_is_measured_on_its_last_side():
     sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], dtype=float)
     P = np.concatenate([np.linspace(sq[i], sq[i + 1], 101)[:-1] for i in range(4)] + [sq[-1:]])
