@@ -53,6 +53,8 @@ class CommandedRun:
     repeated_lines : per program, the lines executed more than once as different blocks (a
         loop, a subroutine called with other arguments): ``blocks`` holds their last
         execution, so their geometry is not the one of every sample labelled with them.
+    sequence : per program, its blocks in the order they run (a subroutine defined at the
+        top runs where it is called; a loop's blocks once per pass).
     """
 
     t: np.ndarray
@@ -64,6 +66,13 @@ class CommandedRun:
     blocks: tuple[dict[int, Block], ...]
     texts: tuple[str, ...] = ()
     repeated_lines: tuple[frozenset[int], ...] = ()
+    sequence: tuple[tuple[Block, ...], ...] = ()
+
+    def executed(self, p: int) -> tuple[Block, ...]:
+        """Program ``p``'s blocks in the order they run (:attr:`sequence`; by line where it is not kept)."""
+        if p < len(self.sequence):
+            return self.sequence[p]
+        return tuple(b for _, b in sorted(self.blocks[p].items()))
 
     @property
     def axes(self) -> list[str]:
@@ -147,7 +156,7 @@ def command_programs(
         raise InputError("no program given")
     start = {a: float((start or {}).get(a, 0.0)) for a in axes}
     parts: list[dict[str, np.ndarray]] = []
-    segments, lines, info, texts, blocks, repeated = [], [], [], [], [], []
+    segments, lines, info, texts, blocks, repeated, sequence = [], [], [], [], [], [], []
     moved: set[str] = set()
     n_settle = int(round(settle_s / Ts))
     for index, item in enumerate(programs):
@@ -162,6 +171,7 @@ def command_programs(
             by_line[b.line] = b
         blocks.append(by_line)
         repeated.append(frozenset(again))
+        sequence.append(tuple(program.blocks))
         for block in program.blocks:
             unknown = set(block.target) - set(axes)
             if unknown:
@@ -195,5 +205,6 @@ def command_programs(
         programs=tuple(info),
         blocks=tuple(blocks),
         repeated_lines=tuple(repeated),
+        sequence=tuple(sequence),
         texts=tuple(texts),
     )

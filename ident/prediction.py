@@ -195,7 +195,8 @@ def block_of_samples(run: CommandedRun, commanded: dict[str, np.ndarray],
                      tol: float = END_TOLERANCE_MM) -> tuple[np.ndarray, np.ndarray]:
     """(program index, line) of the block executing at each sample of a recorded ``commanded``.
 
-    The program's blocks are walked in order from the run's start: a block with motion ends
+    The program's blocks are walked in the order they run (:meth:`CommandedRun.executed`:
+    a loop's blocks once per pass) from the run's start: a block with motion ends
     at the sample where the command comes nearest its end point, within ``tol``, after
     having been farther (a full circle starts on its end point); a block
     without motion (a dwell, a move to where the axes are) ends at once.  Samples after
@@ -205,9 +206,11 @@ def block_of_samples(run: CommandedRun, commanded: dict[str, np.ndarray],
     X = np.column_stack([commanded[a] for a in axes])
     ends, lines, moves, tols = [], [], [], []
     pos = np.array([run.commanded[a][0] if a in run.commanded else 0.0 for a in axes])
-    for p, blocks in enumerate(run.blocks):
-        blend = path_tolerances(blocks.values())
-        for line, b in sorted(blocks.items()):
+    for p in range(len(run.blocks)):
+        executed = run.executed(p)
+        blend = path_tolerances(executed)
+        for b in executed:
+            line = b.line
             tols.append(tol + float(blend.get(line) or 0.0))  # a blended corner is passed within G64 P
             q = pos.copy()
             for a, v in b.target.items():
@@ -258,9 +261,14 @@ def cycle_time_s(run: CommandedRun, commanded: dict[str, np.ndarray] | None = No
     k = np.flatnonzero(_moving(cmd) & (line > 0))
     if k.size == 0:
         return None
-    first = (int(seg[k[0]]), int(line[k[0]]))
-    before = sum(float(b.dwell_s or 0.0) for p, blocks in enumerate(run.blocks) for ln, b in blocks.items()
-                 if (p, ln) < first and b.motion == "G4")
+    first_p, first_line = int(seg[k[0]]), int(line[k[0]])
+    before = 0.0  # the dwells that run before the first moving block, in the order blocks run
+    for p in range(first_p + 1):
+        for b in run.executed(p):
+            if p == first_p and b.line == first_line:
+                break
+            if b.motion == "G4":
+                before += float(b.dwell_s or 0.0)
     return float((k[-1] - k[0] + 1) * (Ts or run.Ts)) + before
 
 

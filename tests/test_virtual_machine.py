@@ -164,6 +164,21 @@ def test_an_arc_line_run_in_a_loop_is_measured_against_each_run_of_it(pid_result
     assert 0 < s.contour_max_mm <= err[s.feed_move].max() + 1e-9
 
 
+def test_a_recording_of_a_loop_is_labelled_in_the_order_its_blocks_ran(pid_result, tmp_path):
+    """--against walks the program's blocks as they ran (a loop's once per pass), not by line:
+    the machine's own run, compared with itself, has its cycle time and every feed sample
+    paired (by line, the walk ended after the first pass: 1.08 s of 3.015 s)."""
+    vm = ident.VirtualMachine.from_result(pid_result, "pid.json")
+    prog = tmp_path / "loop.ngc"
+    prog.write_text("G21 G90 G17 G61.1\nG0 X0 Y0\n#1 = 0\no100 while [#1 LT 3]\nG1 X[#1 * 20] Y0 F3000\n"
+                    "G3 X[#1 * 20] Y0 I5 J0\nG4 P0.1\n#1 = [#1 + 1]\no100 endwhile\nM2\n")
+    pred = vm.run([prog])
+    c = compare(vm, pred.recording, pred.run)
+    assert c.measured_cycle_s == pytest.approx(c.predicted_cycle_s)
+    assert c.standalone["paired_samples"] == np.count_nonzero(c.mask)
+    assert c.standalone["rms_difference_ratio"] == pytest.approx(0.0, abs=1e-12)
+
+
 def test_contour_error_near_the_end_of_a_closed_path_is_measured_on_its_last_side():
     sq = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], dtype=float)
     P = np.concatenate([np.linspace(sq[i], sq[i + 1], 101)[:-1] for i in range(4)] + [sq[-1:]])
