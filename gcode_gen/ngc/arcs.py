@@ -9,10 +9,15 @@ from __future__ import annotations
 
 import math
 
+from gcode_gen.program import ARC_ORDER
+
 __all__ = ["ArcError", "PLANES", "center_from_radius", "check_radii", "sweep"]
 
-#: plane -> (first axis, second axis, normal axis, first offset letter, second offset letter)
-PLANES = {"XY": ("X", "Y", "Z", "i", "j"), "XZ": ("Z", "X", "Y", "k", "i"), "YZ": ("Y", "Z", "X", "j", "k")}
+_OFFSET_LETTER = {"X": "i", "Y": "j", "Z": "k"}
+#: plane -> (first axis, second axis, normal axis, first offset letter, second offset letter),
+#: the axes in :data:`gcode_gen.program.ARC_ORDER`'s order
+PLANES = {plane: (a1, a2, ({"X", "Y", "Z"} - {a1, a2}).pop(), _OFFSET_LETTER[a1], _OFFSET_LETTER[a2])
+          for plane, (a1, a2) in ARC_ORDER.items()}
 
 
 class ArcError(ValueError):

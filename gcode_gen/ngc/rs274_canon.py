@@ -24,12 +24,14 @@ import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from gcode_gen.ngc.arcs import PLANES
+
 __all__ = ["Agreement", "CanonMove", "Rs274Run", "compare", "parse_canon", "run_rs274", "RS274"]
 
 RS274 = shutil.which("rs274")
 _CALL = re.compile(r"^\s*\d+\s+N[.\d ]*?\s*([A-Z_0-9]+)\((.*)\)\s*$")
 _AXES = ("X", "Y", "Z", "A", "B", "C", "U", "V", "W")
-_PLANE_AXES = {"XY": ("X", "Y", "Z"), "XZ": ("Z", "X", "Y"), "YZ": ("Y", "Z", "X")}
+_PLANE_AXES = {plane: axes[:3] for plane, axes in PLANES.items()}  # first, second, normal
 
 
 @dataclass(frozen=True)
