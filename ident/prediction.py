@@ -21,6 +21,7 @@ prediction.  The cycle time is the program's run time: first to last moving comm
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -70,12 +71,13 @@ class Place:
     line: int
     t_s: float
     position_mm: dict[str, float]
-    feed_mm_s: float | None
+    feed_mm_s: float | None  # as programmed (F); None for a rapid
     contour_error_mm: float
+    speed_mm_s: float = math.nan  # the command's path speed there (a planner lowers F to its limits)
 
     def to_dict(self) -> dict[str, Any]:
         return {"program": self.program, "line": self.line, "t_s": self.t_s, "position_mm": self.position_mm,
-                "feed_mm_s": self.feed_mm_s, "contour_error_mm": self.contour_error_mm}
+                "feed_mm_s": self.feed_mm_s, "speed_mm_s": self.speed_mm_s, "contour_error_mm": self.contour_error_mm}
 
 
 @dataclass(frozen=True)
@@ -333,6 +335,8 @@ def _path_mode_warnings(run: CommandedRun, per_axis: bool) -> list[str]:
 def _worst_places(run: CommandedRun, rec: Recording, c: np.ndarray, sel: np.ndarray, names: list[str]) -> list[Place]:
     """The largest contour error of each program line, the ``WORST_PLACES`` largest first."""
     key = run.block_key
+    P = np.column_stack([tr.commanded for tr in rec.axes.values()])
+    speed = np.linalg.norm(np.gradient(P, rec.sample_period, axis=0), axis=1) if len(P) > 1 else np.zeros(len(P))
     order = np.flatnonzero(sel)[np.argsort(-c[sel], kind="stable")]
     places, seen = [], set()
     for k in order:
@@ -341,7 +345,8 @@ def _worst_places(run: CommandedRun, rec: Recording, c: np.ndarray, sel: np.ndar
         seen.add(key[k])
         p = int(run.segment[k])
         places.append(Place(names[p], int(run.line[k]), float(rec.t[k]),
-                            {a: float(tr.commanded[k]) for a, tr in rec.axes.items()}, run.feed_at(int(k)), float(c[k])))
+                            {a: float(tr.commanded[k]) for a, tr in rec.axes.items()}, run.feed_at(int(k)), float(c[k]),
+                            float(speed[k])))
         if len(places) == WORST_PLACES:
             break
     return places

@@ -44,7 +44,7 @@ def _figures(summaries: Sequence[PredictionSummary]) -> str:
                 return "n/a"
             p = s.worst[0]
             pos = ", ".join(f"{a} {v:+.3f}" for a, v in p.position_mm.items())
-            feed = f", feed {p.feed_mm_s:g} mm/s" if p.feed_mm_s else ""
+            feed = f", feed {p.feed_mm_s:g} mm/s (path at {p.speed_mm_s:.3g} mm/s there)" if p.feed_mm_s else ""
             return f"{p.program} line {p.line}, t = {p.t_s:.3f} s, at {pos} mm{feed}"
 
         rows.append(("where the contour error is largest",) + tuple(where(s) for s in summaries))
@@ -59,9 +59,11 @@ def _figures(summaries: Sequence[PredictionSummary]) -> str:
 
 def _worst(s: PredictionSummary) -> str:
     rows = [(p.program, p.line, f"{p.t_s:.3f}", ", ".join(f"{a} {v:+.3f}" for a, v in p.position_mm.items()),
-             "rapid" if p.feed_mm_s is None else f"{p.feed_mm_s:g}", f"{p.contour_error_mm * 1e3:.2f}")
+             "rapid" if p.feed_mm_s is None else f"{p.feed_mm_s:g}", f"{p.speed_mm_s:.3g}",
+             f"{p.contour_error_mm * 1e3:.2f}")
             for p in s.worst]
-    return table(rows, ("program", "line", "t (s)", "position (mm)", "feed (mm/s)", "contour error (µm)"))
+    return table(rows, ("program", "line", "t (s)", "position (mm)", "feed (mm/s)", "path speed there (mm/s)",
+                        "contour error (µm)"))
 
 
 def _toolpath_plot(summaries: Sequence[PredictionSummary]) -> str:

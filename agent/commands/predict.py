@@ -49,7 +49,7 @@ def predict(
             line = f"  contour error max {s.contour_max_mm * 1e3:.2f} µm, rms {s.contour_rms_mm * 1e3:.2f} µm"
             if s.worst:
                 p = s.worst[0]
-                feed = f", feed {p.feed_mm_s:g} mm/s" if p.feed_mm_s else ""
+                feed = f", feed {p.feed_mm_s:g} mm/s (path at {p.speed_mm_s:.3g} mm/s there)" if p.feed_mm_s else ""
                 line += f"; largest at {p.program} line {p.line}, t = {p.t_s:.3f} s{feed}"
             typer.echo(line)
         for a, e in s.tracking.items():
