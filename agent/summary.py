@@ -73,7 +73,10 @@ def print_summary(result: IdentifyResult) -> None:
         for note in term_notes(r):
             echo(f"  note: {note}")
         fi = r.fit_identification
-        if r.prior_source:
+        if r.prior_source and r.prior_on_its_own_data:
+            echo(f"  tracking-error fit of that model on this recording, which it was identified on (not held "
+                 f"out): {fi.tracking_error_fit_pct:.2f} % (prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm)")
+        elif r.prior_source:
             echo(f"  {HELD_OUT} of that model on this recording: {fi.tracking_error_fit_pct:.2f} % "
                  f"(prediction error rms {fi.tracking_error_rms_mm * 1e3:.2f} µm)")
         else:

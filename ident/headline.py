@@ -181,10 +181,15 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
         where = f" on {validation_source}" if validation_source else " on the validation recording"
         held = _held_out_words(fv, r.validation_traces, where)
         fig = fv.tracking_error_fit_pct
-    elif r.prior_source:  # the saved model was identified on another recording: this one is held out
+    elif r.prior_source and not r.prior_on_its_own_data:  # identified on other data: these are held out
         held = _held_out_words(fi, r.traces, f" on this recording, which the model of {r.prior_source} was not "
                                f"identified on")
         fig = fi.tracking_error_fit_pct
+    elif r.prior_source:
+        held = (f"the model of {r.prior_source} was identified on this recording: its fit here, which is not held "
+                f"out, is {fi.tracking_error_fit_pct:.2f} % (prediction error {_um(fi.tracking_error_rms_mm)} rms); "
+                f"pass another recording to check it")
+        fig = None
     else:
         held = (f"no held-out recording (pass --validate): the fit on the identification recording, which is not "
                 f"held out, is {fi.tracking_error_fit_pct:.2f} % (prediction error {_um(fi.tracking_error_rms_mm)} rms)")

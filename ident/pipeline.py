@@ -9,6 +9,7 @@ Each stage is a function of ident/; this module only joins them and times them.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from dataclasses import dataclass, replace
@@ -153,11 +154,32 @@ def load_models(path: str | Path) -> dict[str, AxisModel]:
                                f"{exc})") from None
 
 
+def data_fingerprint(rec: Recording, axis: str) -> str:
+    """SHA-256 of one axis's data as identified: sample period, segments, commanded and actual
+    positions (relative to the first actual position, :func:`remove_reference`), float64."""
+    h = hashlib.sha256()
+    tr = rec.axes[axis]
+    for a in (np.array([rec.sample_period]), np.asarray(rec.segment, dtype=np.int64), tr.commanded, tr.actual):
+        h.update(np.ascontiguousarray(a, dtype=a.dtype.newbyteorder("<")).tobytes())
+    return h.hexdigest()
+
+
+def load_fingerprints(path: str | Path) -> dict[str, str]:
+    """Per axis, :func:`data_fingerprint` of the data an identification result JSON's model was
+    fitted to (``identified_on_sha256``; absent from older results and from a ``--model`` check)."""
+    try:
+        doc = json.loads(Path(path).read_text())
+        return {str(a): str(r["identified_on_sha256"]) for a, r in doc["axes"].items() if r.get("identified_on_sha256")}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}  # load_models has said what is wrong with the file
+
+
 def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recording | None,
           against: Recording | None, prior: DriveModel | AxisModel | None,
-          prior_source: str | None = None) -> AxisResult:
+          prior_source: str | None = None, prior_sha256: str | None = None) -> AxisResult:
     Ts = rec.sample_period
     tr = rec.axes[axis]
+    sha = data_fingerprint(rec, axis)
     ref = rec.metadata.get("reference_mm", {}).get(axis, 0.0)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -231,6 +253,7 @@ def _axis(rec: Recording, axis: str, opts: IdentifyOptions, progress, val: Recor
         traces=AxisTraces(rec.t, tr.commanded + ref, tr.actual + ref, x_hat + ref, rec.segment),
         validation_traces=val_traces, prior_source=prior_source if prior is not None else None,
         prior=prior if isinstance(prior, AxisModel) else None,
+        data_sha256=sha, prior_on_its_own_data=prior is not None and prior_sha256 == sha,
     )
 
 
@@ -336,6 +359,7 @@ def identify(
     against: Recording | str | Path | None = None,
     prior: Mapping[str, DriveModel | AxisModel] | None = None,
     prior_source: str | None = None,
+    prior_sha256: Mapping[str, str] | None = None,
     bounds: Bounds = Bounds(),
     refine: bool = True,
     seed: int = 0,
@@ -361,6 +385,8 @@ def identify(
         :class:`AxisModel` is scored as it was saved (its own preview shift and effects) on
         ``recording``, which is then held-out data, and the diagnosis looks for what it lacks.
     prior_source : where ``prior`` came from (a file name), for the summary and the JSON.
+    prior_sha256 : per axis, :func:`data_fingerprint` of the data ``prior`` was fitted to
+        (:func:`load_fingerprints`): on those very data its fit is not called held out.
     bounds : pole constraints of eq. 3.8 (SPEC §5 defaults).
     refine : output-error refinement after the equation-error solve.
     seed, ga_population, ga_generations : of the genetic algorithm (``solver="ga"``).
@@ -409,7 +435,8 @@ def identify(
         for a in names:
             if priors and a not in priors:
                 raise InputError.about("model", f"the given models have none for axis {a}")
-        results = {a: _axis(rec, a, opts, progress, val, sim, priors.get(a), prior_source) for a in names}
+        results = {a: _axis(rec, a, opts, progress, val, sim, priors.get(a), prior_source,
+                            (prior_sha256 or {}).get(a)) for a in names}
         contour = _contour(results, rec, val)
     meta = {k: v for k, v in rec.metadata.items() if k not in ("events", "counter", "source")}
     return IdentifyResult(_name(rec, "<in memory>"), _name(val, "<in memory>") if val is not None else None,

@@ -345,7 +345,9 @@ def _axis_section(r: AxisResult, result: IdentifyResult) -> str:
         fv = r.fit_validation
         rows.append(("held-out fit (validation recording)",
                      f"{fv.tracking_error_fit_pct:.2f} % (prediction error rms {fv.tracking_error_rms_mm * 1e3:.2f} µm)"))
-    rows += [(f"{HELD_OUT} of the model of {r.prior_source} (this recording)" if r.prior_source
+    rows += [(f"fit of the model of {r.prior_source} on this recording, which it was identified on (not held out)"
+              if r.prior_on_its_own_data
+              else f"{HELD_OUT} of the model of {r.prior_source} (this recording)" if r.prior_source
               else "fit on the identification recording (not held out)",
               f"{fit.tracking_error_fit_pct:.2f} % (prediction error rms {fit.tracking_error_rms_mm * 1e3:.2f} µm)"),
              ("equation-error model before refinement (identification recording)",

@@ -66,6 +66,11 @@ class AxisResult:
     prior_source: str | None = None
     #: that saved model as its virtual machine runs it (``model`` and ``shift`` are its own), effects included
     prior: AxisModel | None = None
+    #: fingerprint of this axis's data (:func:`ident.pipeline.data_fingerprint`): an identification
+    #: result says which data its model was fitted to
+    data_sha256: str = ""
+    #: ``--model`` scored on the very data its model was fitted to: no held-out figure
+    prior_on_its_own_data: bool = False
 
     @property
     def base_model(self) -> AxisModel:
@@ -144,6 +149,9 @@ class AxisResult:
         out["preview_shift_samples"] = self.shift
         if self.prior_source is not None:
             out["model_from"] = self.prior_source
+            out["model_identified_on_this_recording"] = self.prior_on_its_own_data
+        else:
+            out["identified_on_sha256"] = self.data_sha256
         out["fit"] = {"identification": self.fit_identification.to_dict(),
                       "validation": self.fit_validation.to_dict() if self.fit_validation else None}
         eq = self.constrained.model.to_dict(self.bounds, self.sample_period)

@@ -114,3 +114,23 @@ def test_physics_the_saved_model_lacks_is_named_alone_and_added_to_it(worn_machi
     assert float(line.split("gap ")[1].split()[0]) == pytest.approx(10.0, rel=0.1)
     assert set(axis["virtual_model"]["effects"]) == {"saturation", "backlash"}
     assert axis["virtual_model"]["effects"]["backlash"]["gap_mm"] == pytest.approx(0.01, rel=0.1)
+
+
+def test_the_recording_a_model_was_identified_on_is_not_called_held_out(work):
+    """A result JSON says which data its model was fitted to (``identified_on_sha256``): checked
+    with ``--model`` on those very data, its fit is told as not held out."""
+    log = _recording(SAVED, work / "own.csv")
+    subprocess.run([*AGENT, "identify", str(log), "--no-diagnose", "--json", str(work / "own.json")],
+                   capture_output=True, text=True, timeout=300, check=True)
+    proc = subprocess.run([*AGENT, "identify", str(log), "--model", str(work / "own.json"), "--no-diagnose",
+                           "--json", str(work / "own_checked.json")], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    predicts = _line(proc.stdout, "predicts:")
+    assert "the model of own.json was identified on this recording" in predicts and "not held out" in predicts
+    assert "held-out fit" not in proc.stdout
+    assert json.loads((work / "own_checked.json").read_text())["axes"]["X"]["model_identified_on_this_recording"]
+
+
+def test_a_new_recording_checked_against_a_saved_model_is_held_out(work, same_machine):
+    _, axis = same_machine
+    assert axis["model_identified_on_this_recording"] is False

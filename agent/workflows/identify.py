@@ -7,7 +7,7 @@ from pathlib import Path
 from agent.outputs import write_json
 from core.reader import load_recording
 from ident.pipeline import identify as identify_recording
-from ident.pipeline import load_models
+from ident.pipeline import load_fingerprints, load_models
 from ident.results import IdentifyResult
 
 __all__ = ["identify_files"]
@@ -26,6 +26,7 @@ def identify_files(path: Path, *, validate: Path | None = None, against: Path | 
         against=load_recording(against) if against is not None else None,
         prior=load_models(model) if model is not None else None,
         prior_source=Path(model).name if model is not None else None,
+        prior_sha256=load_fingerprints(model) if model is not None else None,
         **options,
     )
     if against is not None:  # named in the summary, report and JSON ("recording.against")
