@@ -31,6 +31,7 @@ import numpy as np
 from core.recording import Recording
 from gcode_gen.commands import CommandedRun, ProgramLike
 from gcode_gen.path_mode import path_tolerances
+from gcode_gen.program import ROTARY_AXES
 from ident.contour import path_contour_error
 from ident.virtual_machine import Prediction, VirtualMachine
 
@@ -335,7 +336,10 @@ def _path_mode_warnings(run: CommandedRun, per_axis: bool) -> list[str]:
 def _worst_places(run: CommandedRun, rec: Recording, c: np.ndarray, sel: np.ndarray, names: list[str]) -> list[Place]:
     """The largest contour error of each program line, the ``WORST_PLACES`` largest first."""
     key = run.block_key
-    P = np.column_stack([tr.commanded for tr in rec.axes.values()])
+    # the path speed of the linear axes (a rotary axis's deg/s is not a feed along the path)
+    linear = [tr.commanded for a, tr in rec.axes.items() if a not in ROTARY_AXES] or [
+        tr.commanded for tr in rec.axes.values()]
+    P = np.column_stack(linear)
     speed = np.linalg.norm(np.gradient(P, rec.sample_period, axis=0), axis=1) if len(P) > 1 else np.zeros(len(P))
     order = np.flatnonzero(sel)[np.argsort(-c[sel], kind="stable")]
     places, seen = [], set()
