@@ -103,7 +103,7 @@ def check_test_size(radius: float, feed: float) -> None:
     if 3 * w + wm > 0.5 * np.pi:  # the spike zone [−w, 2w], then the step's window wm
         quarter_ms = 1e3 * 0.5 * np.pi * radius / feed
         raise InputError.about("feed", f"feed {feed:g} mm/s on radius {radius:g} mm: a quarter turn takes "
-                                       f"{quarter_ms:.0f} ms, and a reversal's spike and step are read over "
+                                       f"{quarter_ms:.3g} ms, and a reversal's spike and step are read over "
                                        f"{4e3 * SPIKE_TIME:.0f} ms; give a feed of at most "
                                        f"{np.pi * radius / (8 * SPIKE_TIME):.3g} mm/s on this radius")
 
