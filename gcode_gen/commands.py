@@ -50,9 +50,6 @@ class CommandedRun:
     programs : per program ``{"name", "sha256"}``.
     blocks : per program, its parsed blocks (line number -> Block), for the geometry of
         the path (arc centres) and for naming places by line.
-    repeated_lines : per program, the lines executed more than once as different blocks (a
-        loop, a subroutine called with other arguments): ``blocks`` holds their last
-        execution, so their geometry is not the one of every sample labelled with them.
     sequence : per program, its blocks in the order they run (a subroutine defined at the
         top runs where it is called; a loop's blocks once per pass).
     """
@@ -65,7 +62,6 @@ class CommandedRun:
     programs: tuple[dict[str, str], ...]
     blocks: tuple[dict[int, Block], ...]
     texts: tuple[str, ...] = ()
-    repeated_lines: tuple[frozenset[int], ...] = ()
     sequence: tuple[tuple[Block, ...], ...] = ()
 
     def executed(self, p: int) -> tuple[Block, ...]:
@@ -73,6 +69,13 @@ class CommandedRun:
         if p < len(self.sequence):
             return self.sequence[p]
         return tuple(b for _, b in sorted(self.blocks[p].items()))
+
+    def repeated_lines(self, p: int) -> frozenset[int]:
+        """Program ``p``'s lines executed more than once as different blocks (a loop, a subroutine
+        called with other arguments): :attr:`blocks` holds their last execution, so their geometry
+        is not the one of every sample labelled with them."""
+        first: dict[int, Block] = {}
+        return frozenset(b.line for b in self.executed(p) if first.setdefault(b.line, b) != b)
 
     @property
     def axes(self) -> list[str]:
@@ -156,21 +159,14 @@ def command_programs(
         raise InputError("no program given")
     start = {a: float((start or {}).get(a, 0.0)) for a in axes}
     parts: list[dict[str, np.ndarray]] = []
-    segments, lines, info, texts, blocks, repeated, sequence = [], [], [], [], [], [], []
+    segments, lines, info, texts, blocks, sequence = [], [], [], [], [], []
     moved: set[str] = set()
     n_settle = int(round(settle_s / Ts))
     for index, item in enumerate(programs):
         name, text, program = load_program(item)
         info.append({"name": name, "sha256": hashlib.sha256(text.encode()).hexdigest()})
         texts.append(text)
-        by_line: dict[int, Block] = {}
-        again: set[int] = set()
-        for b in program.blocks:
-            if by_line.get(b.line, b) != b:
-                again.add(b.line)
-            by_line[b.line] = b
-        blocks.append(by_line)
-        repeated.append(frozenset(again))
+        blocks.append({b.line: b for b in program.blocks})
         sequence.append(tuple(program.blocks))
         for block in program.blocks:
             unknown = set(block.target) - set(axes)
@@ -204,7 +200,6 @@ def command_programs(
         Ts=float(Ts),
         programs=tuple(info),
         blocks=tuple(blocks),
-        repeated_lines=tuple(repeated),
         sequence=tuple(sequence),
         texts=tuple(texts),
     )

@@ -159,14 +159,14 @@ def _arcs(run: CommandedRun, axes: list[str], labels: tuple[np.ndarray, np.ndarr
           ) -> tuple[list, np.ndarray | None, tuple[int, int]]:
     """Arc geometry per sample (of ``labels``, default the run's own) for :func:`path_contour_error`: arcs of
     the XY plane (G17) only; an arc of another plane, or of a line that ran as different arcs
-    (a loop, a subroutine: :attr:`CommandedRun.repeated_lines`), counts as the path its samples draw."""
+    (a loop, a subroutine: :meth:`CommandedRun.repeated_lines`), counts as the path its samples draw."""
     if "X" not in axes or "Y" not in axes:
         return [], None, (0, 1)
     plane = (axes.index("X"), axes.index("Y"))
     arcs: list[tuple[np.ndarray, float, float]] = []
     index: dict[tuple[int, int], int] = {}
     for p, blocks in enumerate(run.blocks):
-        again = run.repeated_lines[p] if p < len(run.repeated_lines) else frozenset()
+        again = run.repeated_lines(p)
         for line, b in blocks.items():
             if (b.motion in ("G2", "G3") and b.plane == "XY" and b.center and "X" in b.target and "Y" in b.target
                     and line not in again):
