@@ -75,6 +75,11 @@ class Driver(abc.ABC):
         self.info: StreamInfo | None = None
         #: set by the driver when the controller signals the program has ended
         self.ended = False
+        #: (counter of the newest sample the running controller has made, host time.monotonic()
+        #: s by which it had made it), set by a transport that reports it (a trace ring's head);
+        #: None: the newest sample read stands for it.  The clock check reads it, so that a
+        #: reader falling behind a ring is not taken for a slow controller clock.
+        self.newest: tuple[int, float] | None = None
         self._is_open = False
 
     # -- public API -----------------------------------------------------------------

@@ -37,7 +37,9 @@ Who counts what (no loss is counted twice):
 A second sample behind the last one recorded that counts on from the first is a
 controller restart: the capture ends ``"controller restarted"`` (its samples would land
 on the old run's times).  :class:`~drivers.plausibility.ClockCheck` compares the
-controller time the samples span with the host time they took to arrive; a clock more
+controller time the samples span with the host time they took to arrive (or, where the
+transport reports it, with the host time over which the controller made them: a trace
+ring's head, so that a reader falling behind the ring is no slow clock); a clock more
 than 1.5 times off ends the capture ``"clock mismatch"`` (a wrong sample period or counter
 word order).  A capture that records no sample fails whatever stopped it.  Once the
 inputs are valid (URL, options, register map) and before connecting, a file left at
@@ -357,7 +359,7 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
                 for msg in jumps.check(s):
                     _warn(rec, summary, c, msg)
             if batch and last is not None and not summary.end:
-                wrong = clock.check(last, time.monotonic())
+                wrong = clock.check(*(driver.newest or (last, time.monotonic())))
                 if wrong:
                     summary.end, summary.error = "clock mismatch", wrong
             st = driver.stats

@@ -108,6 +108,11 @@ class ClockCheck:
     their width doubles when the capture outgrows them), so a check costs the same at
     any length of capture.
 
+    Each :meth:`check` takes a counter and a host time by which the controller had made
+    that sample: when the sample arrived or, where the transport reports it, when the
+    controller's newest counter was read (a trace ring's head; then a reader falling behind
+    the ring does not read as a slow clock).
+
     Parameters
     ----------
     sample_period : the controller sample period T_s the capture stamps samples with, s.
@@ -179,5 +184,5 @@ class ClockCheck:
         measured = span * self.expected / (cb - ca) if cb > ca else float("inf")
         return (f"the controller's clock runs {ratio * self.expected:.3g} times as fast as the host's{speed}: "
                 f"counters {ca}..{cb} span {ctrl:.6g} s at the announced sample period {self.T:g} s but "
-                f"arrived over {span:.3f} s of host time (a sample every {measured:.3g} s); the log's times "
+                f"came over {span:.3f} s of host time (a sample every {measured:.3g} s); the log's times "
                 f"would be wrong: check {self.hint or 'the sample period the controller announces'}")

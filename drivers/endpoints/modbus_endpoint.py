@@ -31,8 +31,9 @@ Fault injection (from the source's fault plan, decided up front so tests can com
 
 Options (``agent serve --transport modbus --opt NAME=VALUE``): ``link`` tcp|rtu (default
 tcp), ``port`` TCP port (0 = a free one), ``map`` register map TOML, ``unit``, ``mode``
-(trace|live, written into the printed URL), ``baud`` (RTU, written into the URL; a pty has
-no real baud rate), ``capacity`` ring slots, ``wait`` s to wait for the first request
+(trace|live, written into the printed URL), ``baud`` (RTU, written into the URL), ``pace``
+(RTU: carry the bytes at ``baud``, 10 bits each, as a real line does; default false, since a
+pty has no line rate and runs as fast as the copying thread), ``capacity`` ring slots, ``wait`` s to wait for the first request
 before starting the program (so a capture started a moment later misses nothing),
 ``outage`` s of RTU silence at the disconnect.
 """
@@ -144,8 +145,11 @@ class RegisterImage(ModbusServerContext):
         #: counter + 1 of the newest trace record a client has read; host time of the last request
         self.uploaded_to = 0
         self.last_request = 0.0
-        #: a client has read the status register after the program ended
-        self.end_seen = False
+        #: how far the trace a client had read (:attr:`uploaded_to`) when it last read the
+        #: end-of-program status; None before.  A client has seen the end once this covers
+        #: the last record: a status read in the middle of the upload says ended, yet the
+        #: client still has records to read and its next status read to make.
+        self.end_seen_after: int | None = None
         # live registers: (address, offset in record, words) of each live field
         self._live = [(rmap.counter, 0, 2)]
         if rmap.segment is not None:
@@ -224,10 +228,10 @@ class RegisterImage(ModbusServerContext):
             return ExcCodes.ILLEGAL_ADDRESS
         self.last_request = time.monotonic()
         with self.lock:
-            if address <= self.rmap.status < address + count and self.regs[self.rmap.status] & STATUS_ENDED:
-                self.end_seen = True
             if self.rmap.trace is not None and address + count > self.base:
                 self._note_upload(address, count)
+            if address <= self.rmap.status < address + count and self.regs[self.rmap.status] & STATUS_ENDED:
+                self.end_seen_after = self.uploaded_to
             if self._clock is not None and address < self._live_end and address + count > self._live_start:
                 self._update_live()
             if self._take_corruption(address, count):
@@ -284,10 +288,17 @@ class _PtyLine:
 
     pymodbus' serial server needs a device path and so does the capture, while a single pty
     has a path for one side only; so two ptys are joined by a copying thread (like socat).
-    The thread is also where a pulled cable is simulated (:meth:`cut`).
+    The thread is also where a pulled cable is simulated (:meth:`cut`) and, with ``baud``,
+    where the line's rate is: RS-485 is half duplex, so the bytes of both directions share
+    one line, each chunk delivered when its last byte (start, 8 data and stop bits) would
+    have arrived.
     """
 
-    def __init__(self) -> None:
+    BITS_PER_BYTE = 10
+
+    def __init__(self, baud: int | None = None) -> None:
+        self._byte_s = self.BITS_PER_BYTE / baud if baud else 0.0
+        self._free_at = 0.0  # host time the line is free again
         self.m_server, self.s_server = os.openpty()
         self.m_client, self.s_client = os.openpty()
         for fd in (self.s_server, self.s_client):
@@ -317,6 +328,9 @@ class _PtyLine:
                     time.sleep(0.001)
                     continue
                 if data and time.monotonic() >= self._silent_until:
+                    if self._byte_s:
+                        self._free_at = max(self._free_at, time.monotonic()) + len(data) * self._byte_s
+                        time.sleep(max(0.0, self._free_at - time.monotonic()))
                     try:
                         os.write(peer[fd], data)
                     except OSError:
@@ -337,7 +351,7 @@ class ModbusEndpoint(Endpoint):
 
     name = "modbus"
     option_types = {"link": str, "port": int, "map": str, "unit": int, "mode": str, "baud": int,
-                    "capacity": int, "wait": float, "outage": float}
+                    "pace": bool, "capacity": int, "wait": float, "outage": float}
 
     def __init__(self, source: RealTimeSource, info: StreamInfo, options: dict[str, Any] | None = None) -> None:
         super().__init__(source, info, options)
@@ -350,6 +364,11 @@ class ModbusEndpoint(Endpoint):
         self.wait_s = float(self.options.get("wait", 30.0))
         self.outage_s = float(self.options.get("outage", 1.0))
         self.baud = int(self.options.get("baud", 115200))
+        if self.baud <= 0:
+            raise InputError(f"modbus endpoint: baud={self.baud}; use a positive line rate (bit/s)")
+        self.pace = bool(self.options.get("pace", False))
+        if self.pace and self.link != "rtu":
+            raise InputError("modbus endpoint: pace=true paces a serial line's bytes; use it with link=rtu")
         map_path = self.options.get("map")
         if map_path:
             self.rmap = load_map(map_path)
@@ -389,7 +408,7 @@ class ModbusEndpoint(Endpoint):
     # -- life cycle -------------------------------------------------------------------------
     def start(self) -> None:
         if self.link == "rtu":
-            self._line = _PtyLine()
+            self._line = _PtyLine(self.baud if self.pace else None)
         ready = threading.Event()
         errors: list[BaseException] = []
 
@@ -480,7 +499,8 @@ class ModbusEndpoint(Endpoint):
         while not self.stop_event.is_set():
             now = time.monotonic()
             active = now - img.last_request < 2.0
-            done = img.end_seen and (self.mode != "trace" or self.rmap.trace is None or img.uploaded_to >= last)
+            done = img.end_seen_after is not None and (self.mode != "trace" or self.rmap.trace is None
+                                                       or img.end_seen_after >= last)
             if now >= t_max or (now >= t_end and (done or not active)):
                 return
             self.stop_event.wait(0.05)

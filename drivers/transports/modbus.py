@@ -31,7 +31,11 @@ more than a ring ahead, the overwritten records are skipped.  Missing ticks show
 in the counter of the samples returned, which is how the capture loop counts them as
 dropped (``stats.dropped`` stays 0 so nothing is counted twice; :attr:`ModbusDriver.gaps`
 has the driver's own count).  After a reconnect the upload continues where it stopped,
-so a short outage loses nothing that is still in the ring.
+so a short outage loses nothing that is still in the ring.  A read uploads for at most its
+timeout and leaves the rest of a backlog to the next.  While the controller runs, the head
+read with its host time is :attr:`~drivers.base.Driver.newest`: a slow line makes the reader
+fall behind the ring, and the capture's clock check then judges the controller's clock by the
+head, not by when the records arrive.
 
 *live*: each poll reads status, counter and positions in one request (the default layout
 keeps them contiguous).  A counter that moved by more than one tick since the previous
@@ -447,10 +451,13 @@ class ModbusDriver(Driver):
         out: list[Sample] = []
         while True:
             status, head_u32, _ = self._read_header()
+            read_at = time.monotonic()
             if self._next is None:
                 # First poll: upload what the ring still holds (a trace started before the capture).
                 self._next = head_u32 - min(head_u32, self.capacity)
             head = self._unwrap(head_u32, self._next)
+            if status & STATUS_RUNNING and not status & STATUS_ENDED and head > 0:
+                self.newest = (head - 1, read_at)  # the head moves with the controller's clock
             pending = head - self._next
             if pending < 0:
                 raise TransportError(f"{self.url.raw}: the trace head went back from counter {self._next} to "
@@ -461,7 +468,7 @@ class ModbusDriver(Driver):
                 self._next += lost
                 pending = self.capacity
             if pending > 0:
-                out += self._upload(self._next, head)
+                out += self._upload(self._next, head, deadline)
                 # Return after one pass so the caller writes and shows progress regularly.
                 if out or time.monotonic() >= deadline:
                     return out
@@ -473,14 +480,19 @@ class ModbusDriver(Driver):
                 return out
             time.sleep(min(self.poll_s, max(0.0, deadline - time.monotonic())))
 
-    def _upload(self, first: int, head: int) -> list[Sample]:
-        """Read records ``first .. head-1`` in as few requests as possible; decode; advance."""
+    def _upload(self, first: int, head: int, deadline: float) -> list[Sample]:
+        """Read records ``first .. head-1`` in as few requests as possible; decode; advance.
+
+        Stops at ``deadline`` (host monotonic s) after at least one request, the rest left for
+        the next read: over a slow line a backlog takes seconds, and the caller must write,
+        flush and show progress meanwhile.
+        """
         rmap = self.rmap
         assert rmap is not None and rmap.trace is not None
         W, cap, base = self._W, self.capacity, rmap.trace.base
         samples: list[Sample] = []
         c = first
-        while c < head:
+        while c < head and not (samples and time.monotonic() >= deadline):
             slot = c % cap
             k = min(self._per_read, head - c, cap - slot)  # a request never crosses the ring's end
             try:
