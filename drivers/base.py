@@ -80,6 +80,9 @@ class Driver(abc.ABC):
         #: None: the newest sample read stands for it.  The clock check reads it, so that a
         #: reader falling behind a ring is not taken for a slow controller clock.
         self.newest: tuple[int, float] | None = None
+        #: one-line warnings about the stream the driver raised since the capture last took
+        #: them (e.g. a trace ring that overran); the capture records and prints each once
+        self.notices: list[str] = []
         self._is_open = False
 
     # -- public API -----------------------------------------------------------------

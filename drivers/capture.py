@@ -358,6 +358,9 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
                 last = c
                 for msg in jumps.check(s):
                     _warn(rec, summary, c, msg)
+            for msg in driver.notices:
+                _warn(rec, summary, last or 0, msg)
+            driver.notices.clear()
             if batch and last is not None and not summary.end:
                 wrong = clock.check(*(driver.newest or (last, time.monotonic())))
                 if wrong:
@@ -407,7 +410,7 @@ def _record(driver: Driver, info: StreamInfo, idx: list[int], port: str, scheme:
 
 
 def _warn(rec: McapRecorder, summary: CaptureSummary, counter: int, message: str) -> None:
-    """A plausibility warning: in the log (``/events`` and the summary) and to the caller."""
+    """A plausibility warning or a driver's notice: in the log (``/events`` and the summary) and to the caller."""
     rec.event("warning", counter, 0, message)
     summary.warnings.append(message)
     warnings.warn(message, RapidIdentWarning, stacklevel=3)

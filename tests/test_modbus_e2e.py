@@ -81,6 +81,21 @@ def test_a_reader_slower_than_the_controller_catches_up_from_the_ring_and_no_wro
     assert_complete_and_exact(res, tmp_path, simulated, wire)
 
 
+def test_a_ring_that_overruns_behind_a_slow_line_is_said_once_and_its_losses_counted(tmp_path, program, simulated):
+    # 500 records hold 0.5 s; the paced line carries about 900 a second of the 2000 written.
+    _, res = serve_and_capture(["-t", "modbus", str(program), "--speed", "2", "--opt", "link=rtu", "--opt",
+                                "pace=true", "--opt", "baud=230400", "--opt", "capacity=500"], tmp_path, wait=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.count("trace ring (500 records) overran") == 1
+    log = load_recording(tmp_path / LOG)
+    s = log.metadata["summary"]
+    k = log.metadata["counter"]
+    missing = sorted(set(range(simulated.n_samples)) - set(k.tolist()))
+    assert s["end"] == "program ended" and 0 < s["dropped"] == len(missing)
+    assert_recorded_all_but(log, simulated, missing, wire)  # what was read is exact
+    assert [e["kind"] for e in log.metadata["events"]].count("warning") == 1
+
+
 def test_a_tcp_disconnect_is_survived_and_the_ring_refills_the_gap(tmp_path, program, simulated):
     _, res = serve_and_capture(["-t", "modbus", str(program), "--speed", "2", "--disconnect-at", "0.8",
                                 "--fault-log", "faults.json"], tmp_path, wait=True)

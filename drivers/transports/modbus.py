@@ -174,6 +174,7 @@ class ModbusDriver(Driver):
         self._client = self._make_client()
         self._down_since: float | None = None  # monotonic time the link was found lost
         self._next: int | None = None  # trace: unwrapped counter of the next record to read
+        self._overran = False  # trace: the ring overran once (said once, in :attr:`notices`)
         self._last_live: int | None = None  # live: unwrapped counter of the last sample seen
         self._deferred_error: TransportError | None = None
         self._matched_any = False  # some trace record held its counter: the layout fits
@@ -464,6 +465,15 @@ class ModbusDriver(Driver):
                                      f"{head}: the controller restarted its trace; start a new capture")
             if pending > self.capacity:
                 lost = pending - self.capacity  # overwritten before we could read them
+                if not self._overran:
+                    self._overran = True
+                    self.notices.append(
+                        f"the controller's trace ring ({self.capacity} records) overran: the records of counters "
+                        f"{self._next}..{self._next + lost - 1} were overwritten before they were read (counted as dropped, "
+                        f"as are later overruns): the capture fell more than the ring's "
+                        f"{self.capacity * self.period:g} s behind, in an outage or on a link that carries "
+                        f"fewer records than the controller writes ({1 / self.period:g} a second; a faster "
+                        f"link, fewer axes in the map or a larger ring keep up)")
                 self.gaps += lost
                 self._next += lost
                 pending = self.capacity
