@@ -301,6 +301,23 @@ def test_cli_prints_the_ini_lines_to_change_with_backlash_from_the_gap(tmp_path)
     assert after["step_overshoot"] <= 0.001
 
 
+def test_a_part_program_with_tool_offsets_is_judged_with_its_tool_table(tmp_path):
+    """A part program that applies a tool length offset (G43 H1) needs the tool table, as in
+    agent predict: without it one line names --tool-table, with it the tuning runs."""
+    rec = virtual_cnc.simulate(gcode_gen.generate(["X"], seed=3), "fadal-pid", seed=3)
+    (tmp_path / "result.json").write_text(ident.identify(rec, diagnose=False).to_json())
+    (tmp_path / "machine.ini").write_text((ROOT / "fixtures/linuxcnc/machine.ini").read_text())
+    (tmp_path / "part.ngc").write_text("G21 G90\nT1 M6\nG43 H1\nG1 X5 F600\nG1 X0\nM2\n")
+    (tmp_path / "tool.tbl").write_text("T1 P1 Z10.0 D6.0 ;mill\n")
+    cmd = [sys.executable, "-m", "agent.cli", "tune", "--machine", "result.json", "--ini", "machine.ini",
+           "--program", "part.ngc"]
+    p = subprocess.run(cmd, capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and "--tool-table" in p.stderr
+    p = subprocess.run(cmd + ["--tool-table", "tool.tbl"], capture_output=True, text=True, timeout=600, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.startswith("predicted max tracking error: before ")
+
+
 def test_a_part_program_is_judged_by_its_contour_error(identified):
     """--program: the figure is the max contour error of the two-axis program; the tuned
     machine's is smaller and within 10 % of the virtual CNC's measured one."""

@@ -31,6 +31,8 @@ def tune(
                                              help="The recording the machine was identified from (agent identify "
                                                   "LOG): fit each plant to it through the controller's sampled loop "
                                                   "instead of to the identified model."),
+    tool_table: Optional[Path] = typer.Option(None, "--tool-table", help="LinuxCNC tool table for the --program's "
+                                                                         "tool offsets (G43 H, G41/G42 D)."),
     plant_integration: str = typer.Option("continuous", "--plant-integration",
                                           help="continuous (a real drive) | euler (the headless LinuxCNC test "
                                                "machine's HAL plant, one Euler step per servo period)."),
@@ -50,8 +52,11 @@ def tune(
         raise InputError(f"--controller {controller!r}: one of {', '.join(CONTROLLER_FORMS)}")
     if plant_integration not in ("continuous", "euler"):
         raise InputError(f"--plant-integration {plant_integration!r}: continuous or euler")
+    from gcode_gen.commands import parse_program_files
+
     plane = list(parse_plane(axes)) if axes else None
-    result, diff = tune_files(machine, controller=controller, ini=ini, gains=gain, propose=propose, programs=program,
+    parsed = parse_program_files(program, tool_table)
+    result, diff = tune_files(machine, controller=controller, ini=ini, gains=gain, propose=propose, programs=parsed,
                               ballbar=ballbar, radius=radius, feed=feed, axes=plane, u_max=u_max, json_out=json_out,
                               integration=plant_integration, lead_deg=lead_deg, recording=recording)
     what = {"circularity_um": "circularity", "contour_error_max_um": "max contour error",

@@ -14,6 +14,7 @@ from typing import Sequence
 from agent.outputs import write_json
 from core.errors import InputError
 from core.reader import load_recording
+from gcode_gen.commands import ProgramLike
 from ident.tuning import Gains, Criterion, Tuning, tune
 from ident.tuning.controllers import GAIN_NAMES
 from ident.virtual_machine import load_virtual_machine
@@ -44,7 +45,7 @@ def parse_gains(form: str, axes: Sequence[str], assignments: Sequence[str], flag
 
 
 def tune_files(machine: Path, *, controller: str, ini: Path | None, gains: Sequence[str], propose: Sequence[str],
-               programs: Sequence[Path], ballbar: bool, radius: float, feed: float, axes: Sequence[str] | None,
+               programs: Sequence[ProgramLike], ballbar: bool, radius: float, feed: float, axes: Sequence[str] | None,
                u_max: float, json_out: Path | None,
                integration: str = "continuous", lead_deg: float | None = None,
                recording: Path | None = None) -> tuple[Tuning, list[str]]:
