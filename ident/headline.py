@@ -158,7 +158,6 @@ def _friction_words(r: AxisResult) -> str:
 
 def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHeadline:
     """The answer for axis ``r``: identified what, held-out fit, missing physics, what to do."""
-    m = r.model
     bw = tracking_bandwidth_hz(r)
     ident = (f"the closed-loop drive model of eq. 3.3 (tracking and disturbance transfer functions, "
              f"{_friction_words(r)}): tracking bandwidth "

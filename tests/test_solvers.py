@@ -8,7 +8,6 @@ central differences of eq. 3.9 and 0.1 um position noise, unless stated otherwis
 from __future__ import annotations
 
 import math
-import warnings
 
 import numpy as np
 import pytest

@@ -17,7 +17,6 @@ import pytest
 import gcode_gen
 import ident
 import virtual_cnc
-from core.errors import InputError
 from gcode_gen.toolpaths import circle
 from ident.synthetic_ballbar import ballbar_of_recording
 from ident.tuning import Gains, Criterion, TuningRefused, derive_plant, tune
