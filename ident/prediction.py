@@ -48,6 +48,11 @@ WORST_PLACES = 5
 END_TOLERANCE_MM = 5e-3
 
 
+def line_words(program: str, line: int, n: int | None = None) -> str:
+    """Where a program line is, as a machinist looks it up: ``part.ngc line 24 (N90)``."""
+    return f"{program} line {line}" + ("" if n is None else f" (N{n})")
+
+
 @dataclass(frozen=True)
 class AxisErrors:
     """Tracking error of one axis over the feed moves, mm."""
@@ -58,10 +63,15 @@ class AxisErrors:
     at_s: float
     line: int
     program: str
+    n: int | None = None  # the line's block number (N word), if it has one
+
+    @property
+    def where(self) -> str:
+        return line_words(self.program, self.line, self.n)
 
     def to_dict(self) -> dict[str, Any]:
         return {"max_abs_mm": self.max_abs_mm, "rms_mm": self.rms_mm, "at_s": self.at_s,
-                "program": self.program, "line": self.line}
+                "program": self.program, "line": self.line, "block_number": self.n}
 
 
 @dataclass(frozen=True)
@@ -75,10 +85,16 @@ class Place:
     feed_mm_s: float | None  # as programmed (F); None for a rapid
     contour_error_mm: float
     speed_mm_s: float = math.nan  # the command's path speed there (a planner lowers F to its limits)
+    n: int | None = None  # the line's block number (N word), if it has one
+
+    @property
+    def where(self) -> str:
+        return line_words(self.program, self.line, self.n)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"program": self.program, "line": self.line, "t_s": self.t_s, "position_mm": self.position_mm,
-                "feed_mm_s": self.feed_mm_s, "speed_mm_s": self.speed_mm_s, "contour_error_mm": self.contour_error_mm}
+        return {"program": self.program, "line": self.line, "block_number": self.n, "t_s": self.t_s,
+                "position_mm": self.position_mm, "feed_mm_s": self.feed_mm_s, "speed_mm_s": self.speed_mm_s,
+                "contour_error_mm": self.contour_error_mm}
 
 
 @dataclass(frozen=True)
@@ -297,15 +313,12 @@ def analyse(pred: Prediction) -> PredictionSummary:
     sel = feed if feed.any() else np.ones(rec.n_samples, dtype=bool)
     names = [p["name"] for p in run.programs]
 
-    def where(k: int) -> tuple[float, int, str]:
-        return float(rec.t[k]), int(run.line[k]), names[int(run.segment[k])]
-
     tracking = {}
     for a, tr in rec.axes.items():
         e = np.where(sel, tr.tracking_error, 0.0)
         k = int(np.argmax(np.abs(e)))
-        t, line, prog = where(k)
-        tracking[a] = AxisErrors(a, float(abs(e[k])), float(np.sqrt(np.mean(tr.tracking_error[sel] ** 2))), t, line, prog)
+        tracking[a] = AxisErrors(a, float(abs(e[k])), float(np.sqrt(np.mean(tr.tracking_error[sel] ** 2))),
+                                 float(rec.t[k]), int(run.line[k]), names[int(run.segment[k])], _block_number(run, k))
     contour = worst = None
     cmax = crms = None
     if len(axes) >= 2:
@@ -333,6 +346,12 @@ def _path_mode_warnings(run: CommandedRun, per_axis: bool) -> list[str]:
     return out
 
 
+def _block_number(run: CommandedRun, k: int) -> int | None:
+    """The N word of the line sample ``k`` runs, if the line has one."""
+    block = run.blocks[int(run.segment[k])].get(int(run.line[k]))
+    return None if block is None else block.n
+
+
 def _worst_places(run: CommandedRun, rec: Recording, c: np.ndarray, sel: np.ndarray, names: list[str]) -> list[Place]:
     """The largest contour error of each program line, the ``WORST_PLACES`` largest first."""
     key = run.block_key
@@ -350,7 +369,7 @@ def _worst_places(run: CommandedRun, rec: Recording, c: np.ndarray, sel: np.ndar
         p = int(run.segment[k])
         places.append(Place(names[p], int(run.line[k]), float(rec.t[k]),
                             {a: float(tr.commanded[k]) for a, tr in rec.axes.items()}, run.feed_at(int(k)), float(c[k]),
-                            float(speed[k])))
+                            float(speed[k]), _block_number(run, k)))
         if len(places) == WORST_PLACES:
             break
     return places

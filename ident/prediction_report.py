@@ -45,12 +45,12 @@ def _figures(summaries: Sequence[PredictionSummary]) -> str:
             p = s.worst[0]
             pos = ", ".join(f"{a} {v:+.3f}" for a, v in p.position_mm.items())
             feed = f", feed {p.feed_mm_s:g} mm/s (path at {p.speed_mm_s:.3g} mm/s there)" if p.feed_mm_s else ""
-            return f"{p.program} line {p.line}, t = {p.t_s:.3f} s, at {pos} mm{feed}"
+            return f"{p.where}, t = {p.t_s:.3f} s, at {pos} mm{feed}"
 
         rows.append(("where the contour error is largest",) + tuple(where(s) for s in summaries))
     for axis in dict.fromkeys(a for s in summaries for a in s.tracking):
         rows.append((f"{axis} max tracking error (feed moves)",) + tuple(
-            (f"{_um(s.tracking[axis].max_abs_mm)} ({s.tracking[axis].program} line {s.tracking[axis].line})"
+            (f"{_um(s.tracking[axis].max_abs_mm)} at {s.tracking[axis].where}"
              if axis in s.tracking else "n/a") for s in summaries))
         rows.append((f"{axis} rms tracking error (feed moves)",) + tuple(
             _um(s.tracking[axis].rms_mm) if axis in s.tracking else "n/a" for s in summaries))
@@ -58,7 +58,7 @@ def _figures(summaries: Sequence[PredictionSummary]) -> str:
 
 
 def _worst(s: PredictionSummary) -> str:
-    rows = [(p.program, p.line, f"{p.t_s:.3f}", ", ".join(f"{a} {v:+.3f}" for a, v in p.position_mm.items()),
+    rows = [(p.program, p.line if p.n is None else f"{p.line} (N{p.n})", f"{p.t_s:.3f}", ", ".join(f"{a} {v:+.3f}" for a, v in p.position_mm.items()),
              "rapid" if p.feed_mm_s is None else f"{p.feed_mm_s:g}", f"{p.speed_mm_s:.3g}",
              f"{p.contour_error_mm * 1e3:.2f}")
             for p in s.worst]
@@ -84,7 +84,7 @@ def _toolpath_plot(summaries: Sequence[PredictionSummary]) -> str:
         # one label per program line, fanned out from its point so labels never sit on each other
         shown_lines = list({p.line: p for p in reversed(s.worst[:3])}.values())[::-1]
         for i, p in enumerate(shown_lines):
-            ax.annotate(f"line {p.line}", (p.position_mm[a], p.position_mm[b]), xytext=(14, 14 - 16 * i),
+            ax.annotate(f"line {p.line}" + ("" if p.n is None else f" N{p.n}"), (p.position_mm[a], p.position_mm[b]), xytext=(14, 14 - 16 * i),
                         textcoords="offset points", fontsize=8, color="C3",
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8),
                         arrowprops=dict(arrowstyle="-", color="C3", lw=0.6))

@@ -125,6 +125,20 @@ def test_worst_places_name_the_program_line_and_feed(pid_machine):
     assert [p.contour_error_mm for p in s.worst] == sorted((p.contour_error_mm for p in s.worst), reverse=True)
 
 
+def test_a_line_with_a_block_number_is_named_by_line_and_n_word(pid_machine, tmp_path):
+    # CAM programs number their blocks; a machinist looks a place up by either
+    prog = tmp_path / "cam.ngc"
+    prog.write_text("%\n(cam)\nN10 G21 G90 G64 P0.01\nN20 G1 X0 Y0 F1200\nN30 G1 X20 Y0\nN40 G1 X20 Y20\n"
+                    "G1 X0 Y20\nN60 M2\n%\n")
+    s = ident.predict([prog], pid_machine)
+    numbers = {5: 30, 6: 40, 7: None}  # line -> N word (line 7 has none)
+    assert s.worst and all(p.n == numbers[p.line] for p in s.worst)
+    named = [p for p in s.worst if p.n is not None][0]
+    assert named.where == f"cam.ngc line {named.line} (N{named.n})"
+    assert named.to_dict()["block_number"] == named.n
+    assert {e.n for e in s.tracking.values()} <= {30, 40, None}
+
+
 # -- contour error: the normal distance to lines and arcs ------------------------------------
 
 def test_contour_error_of_a_circle_is_its_radial_deviation_not_the_chord():

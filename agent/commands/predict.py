@@ -50,10 +50,10 @@ def predict(
             if s.worst:
                 p = s.worst[0]
                 feed = f", feed {p.feed_mm_s:g} mm/s (path at {p.speed_mm_s:.3g} mm/s there)" if p.feed_mm_s else ""
-                line += f"; largest at {p.program} line {p.line}, t = {p.t_s:.3f} s{feed}"
+                line += f"; largest at {p.where}, t = {p.t_s:.3f} s{feed}"
             typer.echo(line)
         for a, e in s.tracking.items():
-            typer.echo(f"  {a}: tracking error max {e.max_abs_mm * 1e3:.2f} µm ({e.program} line {e.line}), "
+            typer.echo(f"  {a}: tracking error max {e.max_abs_mm * 1e3:.2f} µm at {e.where}, "
                        f"rms {e.rms_mm * 1e3:.2f} µm")
     for c in comparisons:
         d = c.to_dict()
