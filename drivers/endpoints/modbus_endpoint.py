@@ -33,9 +33,9 @@ Options (``agent serve --transport modbus --opt NAME=VALUE``): ``link`` tcp|rtu 
 tcp), ``port`` TCP port (0 = a free one), ``map`` register map TOML, ``unit``, ``mode``
 (trace|live, written into the printed URL), ``baud`` (RTU, written into the URL), ``pace``
 (RTU: carry the bytes at ``baud``, 10 bits each, as a real line does; default false, since a
-pty has no line rate and runs as fast as the copying thread), ``capacity`` ring slots, ``wait`` s to wait for the first request
-before starting the program (so a capture started a moment later misses nothing),
-``outage`` s of RTU silence at the disconnect.
+pty has no line rate and runs as fast as the copying thread), ``capacity`` ring slots,
+``wait`` s to wait for the first request before starting the program (so a capture started
+a moment later misses nothing), ``outage`` s of RTU silence at the disconnect.
 """
 
 from __future__ import annotations

@@ -468,9 +468,9 @@ class ModbusDriver(Driver):
                 if not self._overran:
                     self._overran = True
                     self.notices.append(
-                        f"the controller's trace ring ({self.capacity} records) overran: the records of counters "
-                        f"{self._next}..{self._next + lost - 1} were overwritten before they were read (counted as dropped, "
-                        f"as are later overruns): the capture fell more than the ring's "
+                        f"the controller's trace ring ({self.capacity} records) overran: the records of "
+                        f"counters {self._next}..{self._next + lost - 1} were overwritten before they were read "
+                        f"(counted as dropped, as are later overruns): the capture fell more than the ring's "
                         f"{self.capacity * self.period:g} s behind, in an outage or on a link that carries "
                         f"fewer records than the controller writes ({1 / self.period:g} a second; a faster "
                         f"link, fewer axes in the map or a larger ring keep up)")
