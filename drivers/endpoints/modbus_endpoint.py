@@ -299,6 +299,7 @@ class _PtyLine:
     def __init__(self, baud: int | None = None) -> None:
         self._byte_s = self.BITS_PER_BYTE / baud if baud else 0.0
         self._free_at = 0.0  # host time the line is free again
+        self._busy = False  # the thread holds bytes it has read and not yet written
         self.m_server, self.s_server = os.openpty()
         self.m_client, self.s_client = os.openpty()
         for fd in (self.s_server, self.s_client):
@@ -322,9 +323,11 @@ class _PtyLine:
             except (OSError, ValueError):
                 return
             for fd in ready:
+                self._busy = True  # from here until written, the bytes are on the line
                 try:
                     data = os.read(fd, 4096)
                 except OSError:
+                    self._busy = False
                     time.sleep(0.001)
                     continue
                 if data and time.monotonic() >= self._silent_until:
@@ -335,8 +338,28 @@ class _PtyLine:
                         os.write(peer[fd], data)
                     except OSError:
                         pass
+                self._busy = False
+
+    def _carrying(self) -> bool:
+        """Whether bytes are still on their way (waiting to be copied, or being carried)."""
+        if self._busy:
+            return True
+        try:
+            ready, _, _ = select.select([self.m_server, self.m_client], [], [], 0)
+        except (OSError, ValueError):
+            return False
+        return bool(ready)
+
+    def drain(self, timeout: float = 1.0) -> None:
+        """Wait (at most ``timeout`` s) until the bytes on their way are delivered: the server's
+        last response (the end of the program, which the client stops on) may still be in the
+        thread, carried at the line's rate."""
+        deadline = time.monotonic() + timeout
+        while self._carrying() and time.monotonic() < deadline:
+            time.sleep(0.005)
 
     def close(self) -> None:
+        self.drain()
         self._stop.set()
         self._thread.join(timeout=1.0)
         for fd in (self.m_server, self.s_server, self.m_client, self.s_client):
@@ -522,6 +545,8 @@ class ModbusEndpoint(Endpoint):
             loop.call_soon_threadsafe(drop_all)
 
     def _close(self) -> None:
+        if self._line is not None:
+            self._line.drain()  # before the server stops: its last response may be on the line
         if self._loop is not None and self._thread is not None:
             self._loop.call_soon_threadsafe(self._loop.stop)
             self._thread.join(timeout=5.0)

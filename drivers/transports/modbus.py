@@ -175,6 +175,7 @@ class ModbusDriver(Driver):
         self._down_since: float | None = None  # monotonic time the link was found lost
         self._next: int | None = None  # trace: unwrapped counter of the next record to read
         self._overran = False  # trace: the ring overran once (said once, in :attr:`notices`)
+        self._overtaken = False  # trace: a lapped record was read since the head was last read
         self._last_live: int | None = None  # live: unwrapped counter of the last sample seen
         self._deferred_error: TransportError | None = None
         self._matched_any = False  # some trace record held its counter: the layout fits
@@ -463,20 +464,26 @@ class ModbusDriver(Driver):
             if pending < 0:
                 raise TransportError(f"{self.url.raw}: the trace head went back from counter {self._next} to "
                                      f"{head}: the controller restarted its trace; start a new capture")
-            if pending > self.capacity:
-                lost = pending - self.capacity  # overwritten before we could read them
+            # Records overwritten before we could read them (an outage, a slow link): resume at the
+            # oldest record the ring still holds -- or, once the controller has overtaken the reader
+            # (a lapped record was read), at the newest, the one furthest from being overwritten:
+            # from the oldest a slower reader reads little but lapped records.
+            keep = 1 if self._overtaken else self.capacity
+            self._overtaken = False
+            if pending > keep:
+                lost = pending - keep
                 if not self._overran:
                     self._overran = True
                     self.notices.append(
-                        f"the controller's trace ring ({self.capacity} records) overran: the records of "
-                        f"counters {self._next}..{self._next + lost - 1} were overwritten before they were read "
-                        f"(counted as dropped, as are later overruns): the capture fell more than the ring's "
-                        f"{self.capacity * self.period:g} s behind, in an outage or on a link that carries "
-                        f"fewer records than the controller writes ({1 / self.period:g} a second; a faster "
-                        f"link, fewer axes in the map or a larger ring keep up)")
+                        f"the controller's trace ring ({self.capacity} records) overran at counter {self._next}: "
+                        f"the capture fell more than the ring's {self.capacity * self.period:g} s behind, in an "
+                        f"outage or on a link that carries fewer records than the controller writes "
+                        f"({1 / self.period:g} a second); it resumes at the oldest record still in the ring, or "
+                        f"at the newest once the controller overtakes it, and counts the records lost as "
+                        f"dropped (a faster link, fewer axes in the map or a larger ring keep up)")
                 self.gaps += lost
                 self._next += lost
-                pending = self.capacity
+                pending = keep
             if pending > 0:
                 out += self._upload(self._next, head, deadline)
                 # Return after one pass so the caller writes and shows progress regularly.
@@ -516,6 +523,8 @@ class ModbusDriver(Driver):
             samples += self.decode_records(c, regs.reshape(k, W))
             c += k
             self._next = c
+            if self._overtaken:  # the rest is being overwritten as we read: re-read the head
+                break
         self.stats.received += len(samples)
         return samples
 
@@ -523,7 +532,9 @@ class ModbusDriver(Driver):
         """Trace records read for counters ``c0, c0+1, ...`` (uint16, shape (k, record_words)) -> Samples.
 
         A record whose own counter is not the expected one (stale or overwritten slot) is
-        skipped and counted in :attr:`gaps` and ``stats.skipped``; if the first
+        skipped and counted in :attr:`gaps` and, unless a later lap overwrote it (then the
+        controller has overtaken the reader, :meth:`_read_trace` resumes at the newest
+        record), in ``stats.skipped``; if the first
         :data:`MISMATCH_LIMIT` records of the capture all are, the map does not fit the
         controller and a :class:`StreamError` says which field to check.  Positions:
         ``count / counts_per_unit(scale_mm)`` (drivers.scaling).
@@ -533,7 +544,11 @@ class ModbusDriver(Driver):
         got = decode_u32(rec[:, 0], rec[:, 1], self.rmap.word_order, signed=False)
         ok = got == (expect & 0xFFFFFFFF)
         self.gaps += int(k - ok.sum())  # stale (never written) or already overwritten slots
-        self.stats.skipped += int(k - ok.sum())
+        # A lapped record (a ring newer than expected) is a record lost to an overrun, not one
+        # that cannot be used: the map read it right.
+        lapped = self._lapped(got, expect)
+        self._overtaken |= bool(lapped.any())
+        self.stats.skipped += int((~ok & ~lapped).sum())
         if not self._matched_any:
             if ok.any():
                 self._matched_any = True
@@ -562,6 +577,11 @@ class ModbusDriver(Driver):
         T = self.period
         return [Sample(cnt, cnt * T, tuple(cm), tuple(ac), sg)
                 for cnt, sg, cm, ac in zip(counters.tolist(), seg.tolist(), cmd.tolist(), act.tolist())]
+
+    def _lapped(self, got: np.ndarray, expect: np.ndarray) -> np.ndarray:
+        """Whether each 32-bit counter ``got`` is a later lap of the slot of ``expect`` (whole rings newer)."""
+        d = (got.astype(np.int64) - expect) % (1 << 32)
+        return (d > 0) & (d < (1 << 31)) & (d % self.capacity == 0)
 
     def _in_own_slot(self, got: np.ndarray, expect: np.ndarray) -> np.ndarray:
         """Whether each 32-bit counter ``got`` belongs in the slot of ``expect`` (differs by whole rings)."""
