@@ -178,6 +178,22 @@ def test_capture_started_late_uploads_what_the_ring_still_holds():
 
 # -- live polling -------------------------------------------------------------------------
 
+def test_a_record_a_later_lap_overwrote_is_lost_not_unusable():
+    # Read slot by slot, a ring of 100: counter 0's record, then in counter 1's slot the record
+    # of counter 101 (the controller overtook the reader), then in counter 2's slot one that
+    # belongs in no slot of this ring (a map that does not fit reads like that).
+    rec = random_walk(300)
+    with serving(rec, capacity=100) as (ep, src):
+        drv = open_driver(ep.port_url())
+        drv.open()
+        try:
+            got = drv.decode_records(0, np.stack([ep.records[0], ep.records[101], ep.records[57]]))
+        finally:
+            drv.close()
+    assert [s.counter for s in got] == [0]
+    assert drv.gaps == 2 and drv.stats.skipped == 1  # the lapped record is a loss, the foreign one unusable
+
+
 def test_live_polling_returns_exact_values_and_counts_unseen_ticks_as_gaps():
     rec = random_walk(1000, axes="XY")
     with serving(rec, mode="live") as (ep, src):
