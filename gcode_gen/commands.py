@@ -101,9 +101,13 @@ class CommandedRun:
             values.append(default if block is None else value(p, block))
         return np.asarray(values, dtype=dtype)[inverse]
 
+    def block_at(self, k: int) -> Block | None:
+        """The block whose line sample ``k`` is labelled with (None while settling)."""
+        return self.blocks[int(self.segment[k])].get(int(self.line[k]))
+
     def feed_at(self, k: int) -> float | None:
         """Programmed feed (mm/s) of the block executed at sample ``k``, None for rapids/settling."""
-        blk = self.blocks[int(self.segment[k])].get(int(self.line[k]))
+        blk = self.block_at(k)
         return None if blk is None or blk.motion == "G0" else blk.feed
 
 

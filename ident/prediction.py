@@ -48,9 +48,14 @@ WORST_PLACES = 5
 END_TOLERANCE_MM = 5e-3
 
 
+def line_number_words(line: int, n: int | None = None) -> str:
+    """A program line's number and, if it has one, its block number: ``24 (N90)``."""
+    return f"{line}" + ("" if n is None else f" (N{n})")
+
+
 def line_words(program: str, line: int, n: int | None = None) -> str:
     """Where a program line is, as a machinist looks it up: ``part.ngc line 24 (N90)``."""
-    return f"{program} line {line}" + ("" if n is None else f" (N{n})")
+    return f"{program} line {line_number_words(line, n)}"
 
 
 @dataclass(frozen=True)
@@ -348,7 +353,7 @@ def _path_mode_warnings(run: CommandedRun, per_axis: bool) -> list[str]:
 
 def _block_number(run: CommandedRun, k: int) -> int | None:
     """The N word of the line sample ``k`` runs, if the line has one."""
-    block = run.blocks[int(run.segment[k])].get(int(run.line[k]))
+    block = run.block_at(k)
     return None if block is None else block.n
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from ident.html_page import page, png, pyplot, table, write_html
 from ident.model import BASE_KEYS
-from ident.prediction import Comparison, PredictionSummary
+from ident.prediction import Comparison, PredictionSummary, line_number_words
 
 __all__ = ["render_prediction_report", "write_prediction_report"]
 
@@ -58,7 +58,8 @@ def _figures(summaries: Sequence[PredictionSummary]) -> str:
 
 
 def _worst(s: PredictionSummary) -> str:
-    rows = [(p.program, p.line if p.n is None else f"{p.line} (N{p.n})", f"{p.t_s:.3f}", ", ".join(f"{a} {v:+.3f}" for a, v in p.position_mm.items()),
+    rows = [(p.program, line_number_words(p.line, p.n), f"{p.t_s:.3f}",
+             ", ".join(f"{a} {v:+.3f}" for a, v in p.position_mm.items()),
              "rapid" if p.feed_mm_s is None else f"{p.feed_mm_s:g}", f"{p.speed_mm_s:.3g}",
              f"{p.contour_error_mm * 1e3:.2f}")
             for p in s.worst]
@@ -84,7 +85,8 @@ def _toolpath_plot(summaries: Sequence[PredictionSummary]) -> str:
         # one label per program line, fanned out from its point so labels never sit on each other
         shown_lines = list({p.line: p for p in reversed(s.worst[:3])}.values())[::-1]
         for i, p in enumerate(shown_lines):
-            ax.annotate(f"line {p.line}" + ("" if p.n is None else f" N{p.n}"), (p.position_mm[a], p.position_mm[b]), xytext=(14, 14 - 16 * i),
+            ax.annotate(f"line {line_number_words(p.line, p.n)}", (p.position_mm[a], p.position_mm[b]),
+                        xytext=(14, 14 - 16 * i),
                         textcoords="offset points", fontsize=8, color="C3",
                         bbox=dict(boxstyle="round,pad=0.15", fc="white", ec="none", alpha=0.8),
                         arrowprops=dict(arrowstyle="-", color="C3", lw=0.6))

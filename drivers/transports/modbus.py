@@ -546,7 +546,9 @@ class ModbusDriver(Driver):
         self.gaps += int(k - ok.sum())  # stale (never written) or already overwritten slots
         # A lapped record (a ring newer than expected) is a record lost to an overrun, not one
         # that cannot be used: the map read it right.
-        lapped = self._lapped(got, expect)
+        laps = self._laps(got, expect)
+        own_slot = laps % self.capacity == 0  # stale (ring older), right, or lapped (ring newer)
+        lapped = own_slot & (laps > 0)
         self._overtaken |= bool(lapped.any())
         self.stats.skipped += int((~ok & ~lapped).sum())
         if not self._matched_any:
@@ -559,7 +561,7 @@ class ModbusDriver(Driver):
                 # misread head makes the driver do), a stale one (counter - k x capacity: the
                 # controller skipped that tick) or one lapped since the head was read
                 # (counter + k x capacity) are what a fitting map also reads.
-                foreign = (got != 0) & ~self._in_own_slot(got, expect)
+                foreign = (got != 0) & ~own_slot
                 self._unmatched.append((expect[foreign], rec[foreign]))
                 n = sum(len(e) for e, _ in self._unmatched)
                 if n >= MISMATCH_LIMIT:
@@ -578,15 +580,12 @@ class ModbusDriver(Driver):
         return [Sample(cnt, cnt * T, tuple(cm), tuple(ac), sg)
                 for cnt, sg, cm, ac in zip(counters.tolist(), seg.tolist(), cmd.tolist(), act.tolist())]
 
-    def _lapped(self, got: np.ndarray, expect: np.ndarray) -> np.ndarray:
-        """Whether each 32-bit counter ``got`` is a later lap of the slot of ``expect`` (whole rings newer)."""
-        d = (got.astype(np.int64) - expect) % (1 << 32)
-        return (d > 0) & (d < (1 << 31)) & (d % self.capacity == 0)
-
-    def _in_own_slot(self, got: np.ndarray, expect: np.ndarray) -> np.ndarray:
-        """Whether each 32-bit counter ``got`` belongs in the slot of ``expect`` (differs by whole rings)."""
-        d = (got.astype(np.int64) - expect) % (1 << 32)
-        return (d % self.capacity == 0) | (((1 << 32) - d) % self.capacity == 0)
+    @staticmethod
+    def _laps(got: np.ndarray, expect: np.ndarray) -> np.ndarray:
+        """How many counters each 32-bit counter ``got`` is ahead of ``expect`` (negative: behind),
+        the nearer way round the 32-bit wrap; a whole number of rings when ``got`` belongs in
+        the slot of ``expect``."""
+        return (got.astype(np.int64) - expect + (1 << 31)) % (1 << 32) - (1 << 31)
 
     def unusable_reason(self) -> str:
         if getattr(self, "mode", None) == "live":
