@@ -101,3 +101,16 @@ def test_a_tool_length_offset_runs_with_the_tool_table_it_needs(tmp_path):
     assert res.exit_code == 0, res.output
     rec = load_recording(tmp_path / "b.mcap")
     assert rec.axes["X"].commanded.max() == pytest.approx(10.0)
+
+
+def test_an_axis_that_does_not_follow_its_command_is_warned_about_and_still_written(tmp_path, programs):
+    # a 50 ms dead time in a loop of ~50 Hz bandwidth: the virtual CNC runs it, unstable
+    log = tmp_path / "delayed.mcap"
+    res = invoke("simulate", programs[1], "--effect", "time_delay=0.05", "-o", log)
+    assert res.exit_code == 0, res.output
+    warnings = [line for line in res.output.splitlines() if line.startswith("warning:")]
+    assert [w.split(":")[1].strip() for w in warnings] == ["X", "Y"], res.output  # one line per axis
+    assert all("does not follow the command" in w for w in warnings)
+    assert load_recording(log).n_samples > 0
+    ok = invoke("simulate", programs[1], "--effect", "time_delay=0.002", "-o", tmp_path / "ok.mcap")
+    assert ok.exit_code == 0 and "warning" not in ok.output
