@@ -161,7 +161,9 @@ def axis_headline(r: AxisResult, validation_source: str | None = None) -> AxisHe
     bw = tracking_bandwidth_hz(r)
     ident = (f"the closed-loop drive model of eq. 3.3 (tracking and disturbance transfer functions, "
              f"{_friction_words(r)}): tracking bandwidth "
-             + (f"{bw:.3g} Hz (−3 dB)" if bw else "beyond the Nyquist frequency"))
+             + (f"{bw:.3g} Hz (−3 dB)" if bw else
+                f"above the Nyquist frequency ({0.5 / r.sample_period:.3g} Hz): the tracking gain stays within 3 dB "
+                f"of its low-frequency gain up to there"))
     if r.uncertainty is not None and r.uncertainty.is_equivalent:
         ident += ("; an equivalent model: it reproduces the tracking response the recording excites, not the "
                   "drive's physical gains (which parameters the data do not determine: see the parameter table)")
