@@ -12,20 +12,21 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Mapping, Sequence
 
 import numpy as np
 
-from core.errors import InputError, RecordingError
+from core.errors import InputError, RapidIdentWarning, RecordingError
 from core.reader import load_recording
 from core.recording import Recording
 from ident.axis_model import AxisModel
 from ident.contour import contour_error
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel
-from ident.plausibility import check_identifiable
+from ident.plausibility import STILL_MM, check_identifiable
 from ident.preprocessing import prepare_recording, remove_reference
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
@@ -69,8 +70,20 @@ def _name(rec: Recording, default: str) -> str:
 
 
 def _pick_axes(rec: Recording, wanted: Sequence[str] | None) -> list[str]:
+    """The axes to identify: those ``wanted``, or by default every axis whose command moves.
+
+    A capture often records every axis of the machine while the identification programs
+    move one; an axis whose commanded position never changes is then left out with a
+    warning, not refused (named with ``axes``, or when no axis moves, it is refused by
+    :func:`ident.plausibility.check_identifiable`)."""
     if not wanted:
-        return rec.axis_names
+        moving = [a for a in rec.axis_names if np.ptp(rec.axes[a].commanded) > STILL_MM]
+        still = [a for a in rec.axis_names if a not in moving]
+        if moving and still:
+            warnings.warn(f"{_name(rec, 'the recording')}: axis {', '.join(still)} never moves (its commanded "
+                          f"position stays at {', '.join(f'{rec.axes[a].commanded[0]:.6g}' for a in still)} mm): "
+                          f"not identified", RapidIdentWarning, stacklevel=3)
+        return moving or rec.axis_names
     out = []
     for a in wanted:
         a = a.strip().upper()

@@ -33,7 +33,7 @@ from core.errors import InputError, RapidIdentWarning, UnusableRecordingError
 from core.recording import AxisTrace, Recording
 from ident.preprocessing import segment_slices
 
-__all__ = ["check_identifiable", "UNITS", "MIN_DURATION_S", "MIN_SAMPLES", "MAX_SAMPLE_PERIOD_S"]
+__all__ = ["check_identifiable", "UNITS", "MIN_DURATION_S", "MIN_SAMPLES", "MAX_SAMPLE_PERIOD_S", "STILL_MM"]
 
 #: What ``units`` may say: "auto" (detect metres and refuse them), "mm", or "m" (converted).
 UNITS = ("auto", "mm", "m")
@@ -42,6 +42,8 @@ MIN_DURATION_S = 1.0
 MIN_SAMPLES = 200
 #: Slowest sample clock accepted (50 Hz): drives are recorded at the servo rate.
 MAX_SAMPLE_PERIOD_S = 0.02
+#: A commanded position that spans no more than this (mm) never moves.
+STILL_MM = 1e-9
 #: Actual leading the command by more than this many samples, with the lag explaining at
 #: least half the tracking error's variance, is a swap (measured on the presets and the
 #: drive zoo: real drives lead by at most 0.2 samples, with under 5 % explained; swapped
@@ -136,7 +138,7 @@ def check_identifiable(rec: Recording, names: Sequence[str], *, units: str = "au
     for a in names:
         tr = rec.axes[a]
         span = float(np.ptp(tr.commanded))
-        if span <= 1e-9:
+        if span <= STILL_MM:
             raise UnusableRecordingError(
                 f"no motion on axis {a} in {name}: the commanded position stays at {tr.commanded[0]:.6g} mm; "
                 "record the axis while it runs the identification programs (agent generate)")

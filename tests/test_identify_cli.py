@@ -97,6 +97,22 @@ def test_bad_recordings_give_one_line_errors(tmp_path, maker, message):
     assert message in lines[0]
 
 
+def test_an_axis_recorded_but_never_moved_is_left_out_with_a_warning_unless_asked_for(tmp_path):
+    # a capture of every axis of the machine while the programs moved X only
+    moved = _random_moves()
+    still = AxisTrace(np.full(moved.n_samples, 5.0), np.full(moved.n_samples, 5.0))
+    path = write_recording_csv(Recording(moved.t, {"X": moved.axes["X"], "Y": still}, moved.sample_period),
+                               tmp_path / "xy.csv")
+    out = tmp_path / "r.json"
+    proc = run_in_process("identify", path, "--no-diagnose", "--json", out)
+    assert proc.exit_code == 0, proc.stderr
+    assert list(json.loads(out.read_text())["axes"]) == ["X"]
+    warned = [ln for ln in proc.stderr.splitlines() if ln.startswith("warning:")]
+    assert len(warned) == 1 and "axis Y never moves" in warned[0] and "5 mm" in warned[0]
+    asked = run_in_process("identify", path, "--no-diagnose", "--axes", "Y")  # named: refused
+    assert asked.exit_code == 2 and "no motion on axis Y" in asked.stderr
+
+
 def test_metres_given_as_mm_is_refused_unless_the_units_are_given(tmp_path):
     path = write_recording_csv(_random_moves(scale=1e-3), tmp_path / "metres.csv")
     proc = run_in_process("identify", path, "--no-diagnose")
