@@ -142,7 +142,11 @@ class DiagnosisConfig:
     #: seeds (36, 36, 36) cut the diagnosis median from 24.8 to 15.4 s but named 42/69
     #: against 44/69 — resonance 2/10 against 6/10 (a mode's valley is narrow in frequency
     #: and a secant Jacobian steps over it), saturation 7/9 against 4/9 — and (36, 36, 0)
-    #: lost the same modes (first 59 cases: 35 against 39 for both).
+    #: lost the same modes (first 59 cases: 35 against 39 for both).  Milder, the race's
+    #: differences taken every other iteration only, Broyden's update carrying the
+    #: Jacobian in between, on every trial point: 0.85x the CPU of the timing cases
+    #: (bench_diagnosis_speed.py --compare) but drive-zoo-dev + dev2 44/49 against 47/49
+    #: (a gap taken for a gap and a mode; a dead time, a gap and a mode missed).
     race_evals: tuple[int, ...] = ()
     #: … down to at least this many starts (the best of every variant always stays) …
     joint_starts: int = 2
