@@ -141,6 +141,18 @@ def test_a_serial_endpoint_says_it_waits_for_a_client(program):
     assert waiting, lines
 
 
+def test_serve_warns_when_the_effects_make_the_simulated_loop_unstable(program):
+    # a 50 ms dead time in a loop of ~50 Hz bandwidth: served all the same, said on stderr
+    proc = subprocess.Popen([*AGENT, "serve", str(program), "--transport", "serial", "--effect", "time_delay=0.05"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        lines = _lines_until(proc, proc.stderr, "waiting for a client on ")
+    finally:
+        _stop(proc)
+    warned = [ln for ln in lines if ln.startswith("warning: X: the simulated axis does not follow the command")]
+    assert len(warned) == 1, lines
+
+
 @pytest.mark.parametrize("url, hint", [
     ("serial://dev/ttyUSB0", "serial:///dev/ttyUSB0"),
     ("modbus-rtu://dev/ttyUSB0?baud=115200", "modbus-rtu:///dev/ttyUSB0"),

@@ -5,7 +5,8 @@ machine would make; ``agent simulate`` writes it to a log and the simulated cont
 endpoints (drivers/endpoints) serve it in real time.
 
 Modules:
-* :mod:`virtual_cnc.machine_run` — ``simulate``: programs → interpolator → servo loops → Recording;
+* :mod:`virtual_cnc.machine_run` — ``simulate``: programs → interpolator → servo loops → Recording
+  (``not_following``: the axes of a run that do not follow their command);
 * :mod:`virtual_cnc.drive` — controller/plant/encoder dataclasses, eq. 3.4/3.5 parameters;
 * :mod:`virtual_cnc.effects` — optional physics (SPEC §7) and the ``--effect`` parser;
 * :mod:`virtual_cnc.presets` — named machines (thesis §3.4.1) and TOML machine files;
@@ -18,11 +19,11 @@ from __future__ import annotations
 
 from virtual_cnc.drive import AxisDrive, Controller, Encoder, Plant, closed_loop_parameters, smc_gains
 from virtual_cnc.effects import EFFECTS, Effect, format_effect, parse_effect
-from virtual_cnc.machine_run import simulate
+from virtual_cnc.machine_run import not_following, simulate
 from virtual_cnc.presets import DEFAULT_MACHINE, PRESETS, Machine, load_machine, machine_to_toml
 
 __all__ = [
-    "simulate",
+    "simulate", "not_following",
     "AxisDrive", "Controller", "Encoder", "Plant", "closed_loop_parameters", "smc_gains",
     "EFFECTS", "Effect", "format_effect", "parse_effect",
     "DEFAULT_MACHINE", "PRESETS", "Machine", "load_machine", "machine_to_toml",

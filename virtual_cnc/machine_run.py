@@ -58,3 +58,21 @@ def simulate(
             "programs": [dict(p) for p in run.programs],
         },
     )
+
+
+def not_following(rec: Recording) -> list[str]:
+    """One line per axis whose simulated position strays further from the command than the
+    command's whole travel: no drive that follows its command does that, so the loop (with
+    the effects added) is unstable or held at its output limit — a dead time of tens of
+    milliseconds in a loop of ~50 Hz bandwidth, for one (``agent simulate`` and ``agent serve``
+    warn; the run is theirs all the same)."""
+    out = []
+    for name, tr in rec.axes.items():
+        travel = float(np.ptp(tr.commanded))
+        e = np.abs(tr.tracking_error)
+        worst = float(np.max(e)) if e.size else 0.0
+        if travel > 0.0 and not worst <= travel:  # NaN counts as not following
+            out.append(f"{name}: the simulated axis does not follow the command (tracking error up to "
+                       f"{worst:.3g} mm over {travel:.3g} mm of travel): the loop with the effects added is "
+                       f"unstable or held at its output limit")
+    return out

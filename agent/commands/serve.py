@@ -52,5 +52,10 @@ def serve(
     from gcode_gen.commands import parse_program_files
 
     rec = build_recording(parse_program_files(programs or [], tool_table), machine, effect, seed, recording)
+    if recording is None:  # a run of the virtual CNC: say so when the effects made its loop unstable
+        from virtual_cnc import not_following
+
+        for w in not_following(rec):
+            typer.echo(f"warning: {w}", err=True)
     faults = FaultPlan(drop_rate=drop_rate, corrupt_rate=corrupt_rate, disconnect_at_s=disconnect_at, seed=seed)
     run_serve(transport, rec, speed=speed, faults=faults, options=options, fault_log=fault_log)

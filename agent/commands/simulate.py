@@ -77,24 +77,8 @@ def _print_summary(rec, out: Path, csv: Optional[Path]) -> None:
         typer.echo(f"  {name}: travel {tr.commanded.min():+.3f} … {tr.commanded.max():+.3f} mm, "
                    f"peak feed {np.abs(v).max():.1f} mm/s, tracking error rms {np.sqrt(np.mean(e**2)):.2f} µm, "
                    f"max {np.abs(e).max():.2f} µm")
+    from virtual_cnc import not_following
+
     for w in not_following(rec):
         typer.echo(f"warning: {w}", err=True)
 
-
-def not_following(rec) -> list[str]:
-    """One line per axis whose simulated position strays further from the command than the
-    command's whole travel: no drive that follows its command does that, so the loop (with
-    the effects added) is unstable or held at its output limit — a dead time of tens of
-    milliseconds in a loop of ~50 Hz bandwidth, for one.  The run is written all the same."""
-    import numpy as np
-
-    out = []
-    for name, tr in rec.axes.items():
-        travel = float(np.ptp(tr.commanded))
-        e = np.abs(tr.tracking_error)
-        worst = float(np.max(e)) if e.size else 0.0
-        if travel > 0.0 and not worst <= travel:  # NaN counts as not following
-            out.append(f"{name}: the simulated axis does not follow the command (tracking error up to "
-                       f"{worst:.3g} mm over {travel:.3g} mm of travel): the loop with the effects added is "
-                       f"unstable or held at its output limit")
-    return out
