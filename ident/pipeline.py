@@ -26,7 +26,7 @@ from ident.axis_model import AxisModel
 from ident.contour import contour_error
 from ident.metrics import FitResult, fit_result
 from ident.model import Bounds, DriveModel
-from ident.plausibility import STILL_MM, check_identifiable
+from ident.plausibility import check_identifiable, never_moves
 from ident.preprocessing import prepare_recording, remove_reference
 from ident.refine import refine as refine_model
 from ident.regression import build_regression
@@ -77,8 +77,8 @@ def _pick_axes(rec: Recording, wanted: Sequence[str] | None) -> list[str]:
     warning, not refused (named with ``axes``, or when no axis moves, it is refused by
     :func:`ident.plausibility.check_identifiable`)."""
     if not wanted:
-        moving = [a for a in rec.axis_names if np.ptp(rec.axes[a].commanded) > STILL_MM]
-        still = [a for a in rec.axis_names if a not in moving]
+        still = [a for a in rec.axis_names if never_moves(rec.axes[a])]
+        moving = [a for a in rec.axis_names if a not in still]
         if moving and still:
             warnings.warn(f"{_name(rec, 'the recording')}: axis {', '.join(still)} never moves (its commanded "
                           f"position stays at {', '.join(f'{rec.axes[a].commanded[0]:.6g}' for a in still)} mm): "

@@ -33,7 +33,7 @@ from core.errors import InputError, RapidIdentWarning, UnusableRecordingError
 from core.recording import AxisTrace, Recording
 from ident.preprocessing import segment_slices
 
-__all__ = ["check_identifiable", "UNITS", "MIN_DURATION_S", "MIN_SAMPLES", "MAX_SAMPLE_PERIOD_S", "STILL_MM"]
+__all__ = ["check_identifiable", "UNITS", "MIN_DURATION_S", "MIN_SAMPLES", "MAX_SAMPLE_PERIOD_S", "never_moves"]
 
 #: What ``units`` may say: "auto" (detect metres and refuse them), "mm", or "m" (converted).
 UNITS = ("auto", "mm", "m")
@@ -105,6 +105,11 @@ def _in_mm(rec: Recording, names: Sequence[str], units: str) -> Recording:
     return Recording(t=rec.t, axes=axes, sample_period=rec.sample_period, segment=rec.segment, metadata=meta)
 
 
+def never_moves(tr: AxisTrace) -> bool:
+    """Whether the axis's commanded position stays put over the whole recording."""
+    return float(np.ptp(tr.commanded)) <= STILL_MM
+
+
 def check_identifiable(rec: Recording, names: Sequence[str], *, units: str = "auto") -> Recording:
     """Refuse a recording no drive model can be identified from; return it with positions in mm.
 
@@ -138,7 +143,7 @@ def check_identifiable(rec: Recording, names: Sequence[str], *, units: str = "au
     for a in names:
         tr = rec.axes[a]
         span = float(np.ptp(tr.commanded))
-        if span <= STILL_MM:
+        if never_moves(tr):
             raise UnusableRecordingError(
                 f"no motion on axis {a} in {name}: the commanded position stays at {tr.commanded[0]:.6g} mm; "
                 "record the axis while it runs the identification programs (agent generate)")
